@@ -1,0 +1,178 @@
+"""Bags without ROS: MCAP files in rosbag2's directory layout, written and read with ``mcap``.
+
+A bag is a directory ``<name>/`` holding ``<name>_0.mcap`` and ``metadata.yaml`` (rosbag2
+metadata version 9, as Jazzy writes it).  Messages are CDR-encoded and every channel's schema
+is the full ``ros2msg`` definition, so ``ros2 bag info/play``, Foxglove, rosbags and our
+tools all open the same bag.  The MCAP file also carries rosbag2's ``rosbag2`` metadata
+record and per-channel ``offered_qos_profiles`` / ``topic_type_hash``, as Jazzy's MCAP
+storage plugin writes them.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+import yaml
+from mcap.reader import make_reader
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder behind mcap_ros2's Writer
+from mcap_ros2.decoder import DecoderFactory
+
+from . import interfaces
+from .topics import QosSpec
+
+ROS_DISTRO = "jazzy"
+METADATA_VERSION = 9
+
+
+class BagError(RuntimeError):
+    """A bag cannot be written or read; the message says which file and why."""
+
+
+@dataclass
+class _Channel:
+    channel_id: int
+    type: str
+    qos: QosSpec
+    encoder: Any
+    count: int = 0
+
+
+def _qos_yaml(qos: QosSpec) -> str:
+    return yaml.safe_dump([qos.rosbag2()], sort_keys=False)
+
+
+def stamp(t_ns: int) -> dict[str, int]:
+    """builtin_interfaces/Time as a dict from nanoseconds."""
+    return {"sec": int(t_ns // 1_000_000_000), "nanosec": int(t_ns % 1_000_000_000)}
+
+
+class BagWriter:
+    """Write messages (given as dicts) to a new rosbag2-layout MCAP bag.
+
+    >>> with BagWriter("out/run1") as bag:                        # doctest: +SKIP
+    ...     bag.add_topic("/telemetry", "hasel_wheel_msgs/msg/WheelTelemetry", SENSOR)
+    ...     bag.write("/telemetry", {...}, t_ns)
+    """
+
+    def __init__(self, path: str | os.PathLike, chunk_size: int = 1024 * 1024,
+                 custom_data: Mapping[str, str] | None = None) -> None:
+        self.path = Path(path)
+        if self.path.exists() and any(self.path.iterdir()):
+            raise BagError(f"{self.path}: bag directory exists and is not empty; choose a new "
+                           f"output directory or remove the old bag")
+        self.path.mkdir(parents=True, exist_ok=True)
+        self.file_name = f"{self.path.name}_0.mcap"
+        self._fh = open(self.path / self.file_name, "wb")
+        self._mcap = McapWriter(self._fh, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._mcap.start(profile="ros2", library="hasel_wheel_driver.bagio (mcap-python)")
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, _Channel] = {}
+        self._t_min: int | None = None
+        self._t_max: int | None = None
+        self.custom_data = dict(custom_data or {})
+        self._closed = False
+
+    def add_topic(self, topic: str, datatype: str, qos: QosSpec) -> None:
+        """Declare a topic before writing to it (its schema is embedded once per type)."""
+        if topic in self._channels:
+            raise BagError(f"topic {topic!r} is already declared")
+        if datatype not in self._schemas:
+            text = interfaces.full_definition(datatype)
+            self._schemas[datatype] = self._mcap.register_schema(datatype, "ros2msg", text.encode())
+        encoders = serialize_dynamic(datatype, interfaces.full_definition(datatype))
+        cid = self._mcap.register_channel(topic, "cdr", self._schemas[datatype],
+                                          {"offered_qos_profiles": _qos_yaml(qos),
+                                           "topic_type_hash": ""})
+        self._channels[topic] = _Channel(cid, datatype, qos, encoders[datatype])
+
+    def write(self, topic: str, message: Mapping[str, Any], t_ns: int) -> None:
+        """Encode ``message`` (a dict shaped like the ROS message) and write it at ``t_ns``."""
+        ch = self._channels.get(topic)
+        if ch is None:
+            raise BagError(f"topic {topic!r} was not declared with add_topic()")
+        data = ch.encoder(message)
+        self._mcap.add_message(ch.channel_id, log_time=t_ns, data=data, publish_time=t_ns,
+                               sequence=ch.count)
+        ch.count += 1
+        if self._t_min is None or t_ns < self._t_min:
+            self._t_min = t_ns
+        if self._t_max is None or t_ns > self._t_max:
+            self._t_max = t_ns
+
+    def metadata(self) -> dict[str, Any]:
+        """rosbag2 metadata (version 9) of what has been written so far."""
+        start = self._t_min or 0
+        duration = (self._t_max - start) if self._t_max is not None else 0
+        total = sum(c.count for c in self._channels.values())
+        return {"rosbag2_bagfile_information": {
+            "version": METADATA_VERSION,
+            "storage_identifier": "mcap",
+            "duration": {"nanoseconds": duration},
+            "starting_time": {"nanoseconds_since_epoch": start},
+            "message_count": total,
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": name, "type": c.type, "serialization_format": "cdr",
+                                    "offered_qos_profiles": [c.qos.rosbag2()],
+                                    "type_description_hash": ""},
+                 "message_count": c.count}
+                for name, c in self._channels.items()],
+            "compression_format": "",
+            "compression_mode": "",
+            "relative_file_paths": [self.file_name],
+            "files": [{"path": self.file_name,
+                       "starting_time": {"nanoseconds_since_epoch": start},
+                       "duration": {"nanoseconds": duration},
+                       "message_count": total}],
+            "custom_data": dict(self.custom_data) or None,
+            "ros_distro": ROS_DISTRO,
+        }}
+
+    def close(self) -> None:
+        """Finish the MCAP file (summary, rosbag2 record) and write metadata.yaml."""
+        if self._closed:
+            return
+        meta = self.metadata()
+        inner = yaml.safe_dump(meta["rosbag2_bagfile_information"], sort_keys=False)
+        self._mcap.add_metadata("rosbag2", {"serialized_metadata": inner})
+        self._mcap.finish()
+        self._fh.close()
+        with open(self.path / "metadata.yaml", "w", encoding="utf-8") as f:
+            yaml.safe_dump(meta, f, sort_keys=False)
+        self._closed = True
+
+    def __enter__(self) -> "BagWriter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def mcap_files(path: str | os.PathLike) -> list[Path]:
+    """The MCAP files of a bag directory (in metadata order) or a single .mcap file."""
+    p = Path(path)
+    if p.is_file():
+        return [p]
+    if not p.is_dir():
+        raise BagError(f"{p}: no such bag (expected a rosbag2 directory or a .mcap file)")
+    meta = p / "metadata.yaml"
+    if meta.is_file():
+        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+        return [p / f for f in info["relative_file_paths"]]
+    files = sorted(p.glob("*.mcap"))
+    if not files:
+        raise BagError(f"{p}: directory holds neither metadata.yaml nor any .mcap file")
+    return files
+
+
+def read_messages(path: str | os.PathLike,
+                  topics: list[str] | None = None) -> Iterator[tuple[str, int, Any]]:
+    """Yield (topic, log_time_ns, decoded message) from a bag, in log-time order per file."""
+    for f in mcap_files(path):
+        with open(f, "rb") as fh:
+            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+            for _schema, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
+                yield channel.topic, message.log_time, decoded

@@ -1,0 +1,23 @@
+"""Serial link to the wheel's Teensy, topic table, message definitions and bag I/O."""
+from setuptools import find_packages, setup
+
+package_name = "hasel_wheel_driver"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    package_data={package_name: ["msg_defs/std/*.msg", "msg_defs/hasel_wheel_msgs/*.msg"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="HASEL wheel developers",
+    maintainer_email="dev@hasel-wheel.invalid",
+    description="Serial link to the HASEL wheel's Teensy, topic table, message definitions and bag I/O.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={"console_scripts": []},
+)

@@ -1,0 +1,30 @@
+"""Observer, disturbance estimator, MPC, identification and the embedded runner for the HASEL wheel."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "hasel_wheel_mpc"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="HASEL wheel developers",
+    maintainer_email="dev@hasel-wheel.invalid",
+    description="Observer, disturbance estimator, MPC, identification and the embedded runner for the HASEL wheel.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "hasel_wheel = hasel_wheel_mpc.cli:main",
+        ],
+    },
+)

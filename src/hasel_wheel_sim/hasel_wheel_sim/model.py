@@ -1,0 +1,202 @@
+"""The hybrid model of the rolling wheel (paper Sec. III), written once.
+
+Hybrid state x = (xi1, xi2, q, Delta, delta, eta):
+
+* xi1 [rad]      unwrapped wheel angle (grows while rolling forward),
+* xi2 [rad/s]    wheel speed,
+* q   {0, 1}     HV on the actuator of interest,
+* Delta [rad]    activation-angle down counter,
+* delta [rad]    deactivation-angle down counter,
+* eta [-]        *unwrapped* sector index of the actuator of interest (actuator = eta mod 16).
+
+Input u = (n_a, phi_a, phi_d): target actuator 0..15 and the contact angles [rad] at which
+it switches on and off.  Positive angles accelerate, negative angles brake (Sec. III-D).
+
+The functions take plain floats and a parameter vector ``pv`` (see :mod:`.layout` and
+:func:`param_vector`); numba compiles them (see :mod:`.jit`).  The plant, the MPC predictor
+and the identification all integrate these same functions through :mod:`.integrator`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import layout as L
+from .jit import jit
+from .params import WheelParams
+
+#: Angle between adjacent actuator pads [rad].
+SECTOR = math.pi / 8.0
+#: Number of actuators on the wheel.
+N_ACTUATORS = 16
+#: Below this |contact angle| [rad] the force law is taken as 0 (its limit at 0).
+TINY_ANGLE = 1e-12
+
+
+@dataclass(frozen=True)
+class Extensions:
+    """Physical effects the paper's model lacks, as parameters of the model (all off by default).
+
+    ``com_torque`` [N*m], ``com_phase`` [rad]: a COM offset from the geometric centre gives the
+        axle torque -com_torque * sin(xi1 + com_phase) (com_torque = m_offset * g * e).
+    ``platform_torque`` [N*m], ``platform_phase`` [rad]: a disturbance fixed to the platform,
+        periodic in the pivot angle psi = (r/L) xi1 (eq. (8)): +platform_torque * sin(psi + phase).
+    ``viscous`` [N*m*s/rad]: drag torque -viscous * xi2.
+    ``rise_time`` [s]: the actuator force builds up as 1 - exp(-t_on / rise_time) after switch-on.
+    ``retention_rate`` [1/s], ``retention_recovery`` [s]: charge retention.  Each actuator i
+        accumulates Q_i with dQ_i/dt = q_i - Q_i / retention_recovery [s of HV time]; its force
+        is scaled by exp(-retention_rate * Q_i).
+    ``gains`` [1] x16: per-actuator force gain (fabrication spread).
+    """
+
+    com_torque: float = 0.0
+    com_phase: float = 0.0
+    platform_torque: float = 0.0
+    platform_phase: float = 0.0
+    viscous: float = 0.0
+    rise_time: float = 0.0
+    retention_rate: float = 0.0
+    retention_recovery: float = 300.0
+    gains: tuple[float, ...] = field(default=(1.0,) * N_ACTUATORS)
+
+
+def param_vector(p: WheelParams, ext: Extensions | None = None) -> np.ndarray:
+    """Pack parameters into the float64 vector the compiled core reads, shape (L.P_SIZE,)."""
+    ext = ext or Extensions()
+    pv = np.zeros(L.P_SIZE)
+    pv[L.P_R] = p.r
+    pv[L.P_SIGMA1] = p.sigma1
+    pv[L.P_SIGMA2] = p.sigma2
+    pv[L.P_SIGMA3] = p.sigma3
+    pv[L.P_SIGMA4] = p.sigma4
+    pv[L.P_INV_S5SQ] = 1.0 / p.sigma5**2
+    pv[L.P_SIGMA6] = p.sigma6
+    pv[L.P_BRAKE_GAIN] = p.brake_gain
+    pv[L.P_FRICTION] = p.friction_torque
+    pv[L.P_INV_INERTIA] = 1.0 / p.inertia
+    pv[L.P_PIVOT_RATIO] = p.r / p.L
+    pv[L.P_COM_TORQUE] = ext.com_torque
+    pv[L.P_COM_PHASE] = ext.com_phase
+    pv[L.P_PLATFORM_TORQUE] = ext.platform_torque
+    pv[L.P_PLATFORM_PHASE] = ext.platform_phase
+    pv[L.P_VISCOUS] = ext.viscous
+    pv[L.P_RISE_TIME] = ext.rise_time
+    pv[L.P_RET_RATE] = ext.retention_rate
+    pv[L.P_RET_RECOVERY] = ext.retention_recovery
+    if len(ext.gains) != N_ACTUATORS:
+        raise ValueError(f"gains must have {N_ACTUATORS} entries, got {len(ext.gains)}")
+    pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS] = ext.gains
+    return pv
+
+
+@jit
+def force_law(xi_c: float, xi2: float, phi_a: float, pv: np.ndarray) -> float:
+    """Actuation force F_a [N] of (43) for an actuator that is on (q = 1).
+
+    Positive contact angles use (43) as published.  Negative contact angles are braking
+    (Sec. III-D), which the paper does not model.  Our braking model mirrors the law about
+    xi_c = 0 and scales it by ``brake_gain`` (identifiable from braking data):
+
+        F(xi_c) = k * |xi_c|^-s1 / (s2 |xi2| + s3) * exp(-(ln|xi_c| - s4)^2 / s5^2)
+                  * s6 * (xi_c - phi_a),          k = 1 (xi_c > 0), brake_gain (xi_c < 0).
+
+    The rise term (xi_c - phi_a) is >= 0 while the actuator is on, because it switches on at
+    xi_c = phi_a and xi_c grows as the wheel rolls.  Speed enters as |xi2| so the denominator
+    stays positive if the wheel rolls backwards.
+    """
+    x = abs(xi_c)
+    if x < TINY_ANGLE:
+        return 0.0
+    lx = math.log(x)
+    dl = lx - pv[L.P_SIGMA4]
+    bump = math.exp(-pv[L.P_SIGMA1] * lx - dl * dl * pv[L.P_INV_S5SQ])
+    k = pv[L.P_BRAKE_GAIN] if xi_c < 0.0 else 1.0
+    return k * bump * pv[L.P_SIGMA6] * (xi_c - phi_a) / (pv[L.P_SIGMA2] * abs(xi2) + pv[L.P_SIGMA3])
+
+
+@jit
+def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
+    """Axle torque [N*m] of the extensions that do not involve the actuators (0 when off)."""
+    tau = 0.0
+    if pv[L.P_COM_TORQUE] != 0.0:
+        tau -= pv[L.P_COM_TORQUE] * math.sin(xi1 + pv[L.P_COM_PHASE])
+    if pv[L.P_PLATFORM_TORQUE] != 0.0:
+        tau += pv[L.P_PLATFORM_TORQUE] * math.sin(pv[L.P_PIVOT_RATIO] * xi1 + pv[L.P_PLATFORM_PHASE])
+    if pv[L.P_VISCOUS] != 0.0:
+        tau -= pv[L.P_VISCOUS] * xi2
+    return tau
+
+
+@jit
+def acceleration(xi1: float, xi2: float, q: float, eta: float, phi_a: float, gain: float,
+                 on_time: float, pv: np.ndarray) -> float:
+    """Flow map of xi2: xi2' [rad/s^2] from (38)/(45) plus the enabled extensions.
+
+    (38) divided by L:  (J/L) xi2' = r F_a sin(xi_c) q - (r + L)/L tau_f sign(xi2) + tau_ext.
+    ``gain`` multiplies the actuator force (spread x retention).  At xi2 == 0 friction is
+    static: it cancels any net torque up to its magnitude, so a stopped wheel stays stopped
+    unless driven harder than friction.
+    """
+    tau = 0.0
+    if q != 0.0:
+        xi_c = xi1 - eta * SECTOR
+        tau = gain * pv[L.P_R] * force_law(xi_c, xi2, phi_a, pv) * math.sin(xi_c)
+        if pv[L.P_RISE_TIME] > 0.0:
+            tau *= 1.0 - math.exp(-max(on_time, 0.0) / pv[L.P_RISE_TIME])
+    tau += external_torque(xi1, xi2, pv)
+    tf = pv[L.P_FRICTION]
+    if xi2 > 0.0:
+        fric = tf
+    elif xi2 < 0.0:
+        fric = -tf
+    else:
+        fric = min(max(tau, -tf), tf)
+    return (tau - fric) * pv[L.P_INV_INERTIA]
+
+
+@jit
+def unwrap_target(n_a: float, phi_a: float, xi1: float) -> float:
+    """Unwrapped target sector N = n_a + 16 k for the command u = (n_a, phi_a, phi_d).
+
+    Actuator indices run modulo 16 while xi1 keeps growing, so (49)-(50) need the unwrapped
+    sector (model-notes.md).  We take the first *future* switch-on of actuator n_a: the
+    smallest N == n_a (mod 16) with N pi/8 + phi_a >= xi1, i.e. Delta+ >= 0.  So the step
+    from actuator 15 to 0 becomes 15 -> 16, and braking targets (phi_a < 0) land two
+    sectors ahead as Sec. III-D intends.
+    """
+    c = math.ceil((xi1 - phi_a) / SECTOR)
+    n = n_a + N_ACTUATORS * math.ceil((c - n_a) / N_ACTUATORS)
+    if n * SECTOR + phi_a < xi1:  # guard against rounding in the division
+        n += N_ACTUATORS
+    return float(n)
+
+
+@jit
+def sector_of(xi1: float) -> float:
+    """Unwrapped sector floor(xi1 / (pi/8)) of eq. (40)."""
+    return float(math.floor(xi1 / SECTOR))
+
+
+def jump_map(xi1: float, xi2: float, q: int, eta: float, n_unwrapped: float, phi_a: float,
+             phi_d: float) -> tuple[float, float, int, float, float, float]:
+    """Jump map g(x, u) of (52) with the unwrapped target sector ``n_unwrapped``.
+
+    Returns (xi1+, xi2+, q+, Delta+, delta+, eta+): xi1, xi2 unchanged, q+ = 1 - q,
+    Delta+ = q (N pi/8 + phi_a - xi1), delta+ = N pi/8 + phi_d - xi1,
+    eta+ = q N + (1 - q) eta.  The integrator implements the same map on its state vector.
+    """
+    base = n_unwrapped * SECTOR
+    return (xi1, xi2, 1 - q, q * (base + phi_a - xi1), base + phi_d - xi1,
+            q * n_unwrapped + (1 - q) * eta)
+
+
+def in_jump_set(q: int, act_counter: float, deact_counter: float) -> bool:
+    """Jump set (53): (Delta = 0 and delta != 0 and q = 0) or (Delta = 0 and delta = 0 and q = 1).
+
+    The integrator lands events exactly, i.e. a counter is 0 at the event instant; away from
+    events (x in the flow set (54)) this is False.
+    """
+    return (act_counter == 0.0 and deact_counter != 0.0 and q == 0) or \
+           (act_counter == 0.0 and deact_counter == 0.0 and q == 1)
