@@ -18,6 +18,5 @@ setup(
     maintainer_email="dev@hasel-wheel.invalid",
     description="Serial link to the HASEL wheel's Teensy, topic table, message definitions and bag I/O.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={"console_scripts": []},
 )

@@ -21,7 +21,6 @@ setup(
     maintainer_email="dev@hasel-wheel.invalid",
     description="Observer, disturbance estimator, MPC, identification and the embedded runner for the HASEL wheel.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "hasel_wheel = hasel_wheel_mpc.cli:main",

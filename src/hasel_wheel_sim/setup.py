@@ -21,7 +21,6 @@ setup(
     maintainer_email="dev@hasel-wheel.invalid",
     description="Hybrid model of the HASEL rolling soft wheel and a plant simulator with real-world effects.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "sim_node = hasel_wheel_sim.sim_node:main",

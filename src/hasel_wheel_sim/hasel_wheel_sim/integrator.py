@@ -38,22 +38,27 @@ def _gain(s: np.ndarray, pv: np.ndarray) -> float:
 @jit
 def rk4(xi1: float, xi2: float, h: float, s: np.ndarray, gain: float,
         pv: np.ndarray) -> tuple[float, float]:
-    """One classical RK4 step of length h [s] of (xi1, xi2) with q, eta, phi_a held (a flow)."""
+    """One classical RK4 step of length h [s] of (xi1, xi2) with q, eta, phi_a held (a flow).
+
+    Friction keeps the direction of the speed at the start of the step: a sign change of
+    xi2 inside the step is a stop event, located separately.
+    """
+    fd = 1.0 if xi2 > 0.0 else (-1.0 if xi2 < 0.0 else 0.0)
     q = s[L.S_Q]
     eta = s[L.S_ETA]
     pa = s[L.S_PHI_A]
     t_on = s[L.S_ON_TIME]
     hh = 0.5 * h
-    a1 = acceleration(xi1, xi2, q, eta, pa, gain, t_on, pv)
+    a1 = acceleration(xi1, xi2, q, eta, pa, gain, t_on, pv, fd)
     x2 = xi1 + hh * xi2
     v2 = xi2 + hh * a1
-    a2 = acceleration(x2, v2, q, eta, pa, gain, t_on + hh, pv)
+    a2 = acceleration(x2, v2, q, eta, pa, gain, t_on + hh, pv, fd)
     x3 = xi1 + hh * v2
     v3 = xi2 + hh * a2
-    a3 = acceleration(x3, v3, q, eta, pa, gain, t_on + hh, pv)
+    a3 = acceleration(x3, v3, q, eta, pa, gain, t_on + hh, pv, fd)
     x4 = xi1 + h * v3
     v4 = xi2 + h * a3
-    a4 = acceleration(x4, v4, q, eta, pa, gain, t_on + h, pv)
+    a4 = acceleration(x4, v4, q, eta, pa, gain, t_on + h, pv, fd)
     return (xi1 + h / 6.0 * (xi2 + 2.0 * v2 + 2.0 * v3 + v4),
             xi2 + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
 
@@ -90,7 +95,7 @@ def _locate(s: np.ndarray, gain: float, pv: np.ndarray, h_max: float, target: fl
         else:
             f = v
             df = acceleration(x, v, s[L.S_Q], s[L.S_ETA], s[L.S_PHI_A], gain,
-                              s[L.S_ON_TIME] + hg, pv)
+                              s[L.S_ON_TIME] + hg, pv, 1.0 if v0 > 0.0 else -1.0)
         if which == 0 and abs(f) <= EVENT_TOL:
             return hg
         if which == 1 and abs(f) <= 1e-13:
@@ -182,9 +187,10 @@ def _switch(s: np.ndarray, ev: np.ndarray, n_ev: int) -> int:
         return _record(ev, n_ev, s, L.EV_ON)
     s[L.S_Q] = 0.0
     s[L.S_N_OFF] += 1.0
+    n_ev = _record(ev, n_ev, s, L.EV_OFF)  # eta of the actuator that switched off
     if not _next_command(s):
         s[L.S_ARMED] = 0.0
-    return _record(ev, n_ev, s, L.EV_OFF)
+    return n_ev
 
 
 @jit
@@ -192,7 +198,8 @@ def advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
     """Advance one wheel by exactly h seconds (one firmware tick); return the event count.
 
     ``s`` (S_SIZE,) is updated in place; events are written to ``ev`` (k, 4) as rows
-    (time [s], xi1 [rad], kind, eta) -- see ``layout.EV_*``.
+    (time [s], xi1 [rad], kind, eta) -- see ``layout.EV_*``; eta is the actuator that
+    switched (on/off) or the target latched (arm).
     """
     n_ev = 0
     if s[L.S_ARMED] == 0.0 and s[L.S_Q] == 0.0:

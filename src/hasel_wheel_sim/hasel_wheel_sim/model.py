@@ -131,11 +131,13 @@ def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
 
 @jit
 def acceleration(xi1: float, xi2: float, q: float, eta: float, phi_a: float, gain: float,
-                 on_time: float, pv: np.ndarray) -> float:
+                 on_time: float, pv: np.ndarray, fric_dir: float = 0.0) -> float:
     """Flow map of xi2: xi2' [rad/s^2] from (38)/(45) plus the enabled extensions.
 
     (38) divided by L:  (J/L) xi2' = r F_a sin(xi_c) q - (r + L)/L tau_f sign(xi2) + tau_ext.
-    ``gain`` multiplies the actuator force (spread x retention).  At xi2 == 0 friction is
+    ``gain`` multiplies the actuator force (spread x retention).  ``fric_dir`` (+1/-1) fixes
+    the direction of Coulomb friction for a whole flow segment (the integrator ends a segment
+    with a stop event when xi2 reaches 0); with 0 it follows sign(xi2).  At xi2 == 0 friction is
     static: it cancels any net torque up to its magnitude, so a stopped wheel stays stopped
     unless driven harder than friction.
     """
@@ -147,7 +149,9 @@ def acceleration(xi1: float, xi2: float, q: float, eta: float, phi_a: float, gai
             tau *= 1.0 - math.exp(-max(on_time, 0.0) / pv[L.P_RISE_TIME])
     tau += external_torque(xi1, xi2, pv)
     tf = pv[L.P_FRICTION]
-    if xi2 > 0.0:
+    if fric_dir != 0.0:
+        fric = tf * fric_dir
+    elif xi2 > 0.0:
         fric = tf
     elif xi2 < 0.0:
         fric = -tf
@@ -200,3 +204,30 @@ def in_jump_set(q: int, act_counter: float, deact_counter: float) -> bool:
     """
     return (act_counter == 0.0 and deact_counter != 0.0 and q == 0) or \
            (act_counter == 0.0 and deact_counter == 0.0 and q == 1)
+
+
+#: Braking inputs of Sec. III-D / V-A [rad].
+BRAKE_PHI_A = math.radians(-22.0)
+BRAKE_PHI_D = math.radians(-6.0)
+
+
+def braking_input(xi1: float, phi_a: float = BRAKE_PHI_A,
+                  phi_d: float = BRAKE_PHI_D) -> tuple[int, float, float]:
+    """Braking rule (Sec. III-D): u = ((eta + 2) mod 16, phi_a < 0, phi_d < 0).
+
+    eta is the actuator in contact, floor(xi1 / (pi/8)) of (40).  The target two pads
+    ahead switches on at a negative contact angle, so its force pushes against the rolling
+    direction until it switches off at phi_d (closer to 0).
+    """
+    if not (-SECTOR <= phi_a < phi_d <= 0.0):
+        raise ValueError(f"braking needs -pi/8 <= phi_a < phi_d <= 0 rad, got phi_a={phi_a!r}, "
+                         f"phi_d={phi_d!r}")
+    return (int(math.floor(xi1 / SECTOR)) + 2) % N_ACTUATORS, phi_a, phi_d
+
+
+def accelerating_input(xi1: float, phi_a: float, phi_d: float) -> tuple[int, float, float]:
+    """Sequential acceleration (Sec. IV-B): u = ((eta + 1) mod 16, phi_a, phi_d), eta from (40)."""
+    if not (0.0 <= phi_a < phi_d <= SECTOR):
+        raise ValueError(f"acceleration needs 0 <= phi_a < phi_d <= pi/8 rad, got "
+                         f"phi_a={phi_a!r}, phi_d={phi_d!r}")
+    return (int(math.floor(xi1 / SECTOR)) + 1) % N_ACTUATORS, phi_a, phi_d

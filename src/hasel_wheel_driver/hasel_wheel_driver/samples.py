@@ -1,0 +1,88 @@
+"""Plain-Python telemetry and command records, and their message dictionaries.
+
+The driver (real wheel) and the simulator both produce :class:`TelemetrySample`; the MPC
+and open-loop schedules produce :class:`Command`.  ``*_msg`` functions turn them into the
+dict form of our ROS messages, which the bag writer encodes and nodes copy into rclpy
+messages field by field.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+ENCODER_COUNTS = 1024
+MODE_ACCELERATE = 0
+MODE_BRAKE = 1
+
+
+@dataclass(frozen=True)
+class TelemetrySample:
+    """One 300 Hz device sample (fields as in ``WheelTelemetry.msg``; SI units)."""
+
+    t: float                    # sample time [s] (host receive time; simulated time in the sim)
+    device_time_us: int         # device clock [us]
+    sequence: int               # device sample counter
+    encoder_raw: int            # 0..1023
+    angle: float                # unwrapped encoder angle [rad]
+    q: int                      # 0/1
+    eta: int                    # actuator of interest 0..15
+    eta_unwrapped: int          # unwrapped sector of the actuator of interest
+    active_mask: int            # bit i = HV on actuator i
+    hv_monitor: float           # [V]
+    current_monitor: float      # [A]
+    last_command_sequence: int
+    fault_flags: int = 0
+
+
+@dataclass(frozen=True)
+class Command:
+    """Actuation input u = (n_a, phi_a [rad], phi_d [rad]) with its sequence number."""
+
+    n_a: int
+    phi_a: float
+    phi_d: float
+    sequence: int = 0
+
+    @property
+    def mode(self) -> int:
+        return MODE_BRAKE if self.phi_d <= 0.0 and self.phi_a < 0.0 else MODE_ACCELERATE
+
+
+def header(t: float, frame_id: str = "") -> dict:
+    """std_msgs/Header dict for time t [s] (t >= 0)."""
+    sec = math.floor(t)
+    nsec = int(round((t - sec) * 1e9))
+    if nsec >= 1_000_000_000:
+        sec, nsec = sec + 1, nsec - 1_000_000_000
+    return {"stamp": {"sec": int(sec), "nanosec": nsec}, "frame_id": frame_id}
+
+
+def telemetry_msg(s: TelemetrySample, frame_id: str = "wheel") -> dict:
+    """hasel_wheel_msgs/msg/WheelTelemetry as a dict."""
+    return {"header": header(s.t, frame_id), "device_time_us": s.device_time_us,
+            "sequence": s.sequence, "encoder_raw": s.encoder_raw, "angle": s.angle, "q": s.q,
+            "eta": s.eta, "eta_unwrapped": s.eta_unwrapped, "active_mask": s.active_mask,
+            "hv_monitor": s.hv_monitor, "current_monitor": s.current_monitor,
+            "last_command_sequence": s.last_command_sequence, "fault_flags": s.fault_flags}
+
+
+def joint_state_msg(s: TelemetrySample, joint: str = "wheel_joint") -> dict:
+    """sensor_msgs/msg/JointState with the encoder angle [rad] (no velocity: see the observer)."""
+    return {"header": header(s.t, ""), "name": [joint], "position": [s.angle], "velocity": [],
+            "effort": []}
+
+
+def command_msg(c: Command, t: float) -> dict:
+    """hasel_wheel_msgs/msg/ActuationCommand as a dict."""
+    return {"header": header(t, ""), "sequence": c.sequence, "n_a": c.n_a, "phi_a": c.phi_a,
+            "phi_d": c.phi_d, "mode": c.mode}
+
+
+def state_msg(t: float, xi1: float, xi2: float, q: int, act_counter: float,
+              deact_counter: float, eta_unwrapped: int, disturbance: float = 0.0,
+              xi2_stddev: float = 0.0, quality: float = 1.0) -> dict:
+    """hasel_wheel_msgs/msg/HybridStateEstimate as a dict."""
+    return {"header": header(t, "wheel"), "xi1": xi1, "xi2": xi2, "q": q,
+            "activation_counter": act_counter, "deactivation_counter": deact_counter,
+            "eta": eta_unwrapped % 16, "eta_unwrapped": eta_unwrapped,
+            "disturbance": disturbance, "xi2_stddev": xi2_stddev, "quality": quality}

@@ -1,0 +1,137 @@
+"""``hasel_wheel``: the embedded runner's command line (no ROS needed).
+
+``hasel_wheel demo`` (the default) runs the open-loop trials of ``config/demo_open_loop.yaml``
+on the paper's model, once with exact switching and once switching on 300 Hz firmware
+ticks, records everything to an MCAP bag and prints the table next to the paper's Table II.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import shutil
+import sys
+import time
+from importlib import resources
+from pathlib import Path
+from typing import Sequence
+
+from hasel_wheel_sim.params import ParameterError, load_wheel_params, load_yaml_file
+from hasel_wheel_sim.plant import PlantConfig, load_plant_config
+
+from . import paper
+from .recorder import Recorder, git_revision
+from .trials import TrialResult, run_trial, trials_from_mapping
+
+#: Cross-check numbers of model-notes.md (independent implementation): phi_a [deg] ->
+#: (exact w_ss [rad/s], exact t90 [s], tick w_ss [rad/s]).
+NOTES_CROSS_CHECK = {1: (4.73, 26.6, 3.84), 5: (3.42, 22.5, 3.08), 9: (2.06, 16.1, 2.33),
+                     11: (1.37, 9.8, 1.52)}
+
+
+def packaged(pkg: str, name: str) -> Path:
+    """Path of a default config file shipped with package ``pkg``."""
+    return Path(str(resources.files(pkg) / "config" / name))
+
+
+def _fmt(v: float | None, spec: str = "6.2f") -> str:
+    return " " * len(format(0.0, spec)) if v is None or math.isnan(v) else format(v, spec)
+
+
+def demo_table(exact: list[TrialResult], tick: list[TrialResult]) -> str:
+    """The summary table of the demo as text."""
+    lines = [
+        "Open-loop trials, phi_d = 22 deg, 60 s from 1 rad/s (model-notes set-up).",
+        "w_ss: mean speed over the last 10 s [rad/s]; t90: first time above 90 % of w_ss [s].",
+        "paper: Table II, measured (m/s / 0.157 m); notes: model-notes.md cross-check.",
+        "",
+        "        | model, exact switching | model, 300 Hz ticks | paper Table II  | ratio exact/paper | notes (exact)  | notes",
+        " phi_a  |   w_ss      t90        |   w_ss      t90     |  w_ss     t_r   |  w_ss      t      |  w_ss    t90   | tick w_ss",
+        "--------+------------------------+---------------------+-----------------+-------------------+----------------+----------",
+    ]
+    for e, k in zip(exact, tick):
+        deg = int(round(math.degrees(e.spec.phi_a)))
+        ps, pt = paper.table_ii_speed(deg), paper.table_ii_rise(deg)
+        ns, nt, nk = NOTES_CROSS_CHECK.get(deg, (None, None, None))
+        rs = e.steady_speed / ps if ps else None
+        rt = e.t90 / pt if pt else None
+        lines.append(
+            f" {deg:3d} deg| {_fmt(e.steady_speed)}  {_fmt(e.t90, '7.2f')}        |"
+            f" {_fmt(k.steady_speed)}  {_fmt(k.t90, '7.2f')}     |"
+            f" {_fmt(ps, '5.2f')}  {_fmt(pt, '6.2f')}  |"
+            f"  {_fmt(rs, '5.2f')}    {_fmt(rt, '5.2f')}    |"
+            f"  {_fmt(ns, '5.2f')}  {_fmt(nt, '5.1f')}  |  {_fmt(nk, '5.2f')}")
+    return "\n".join(lines)
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    """Run the open-loop demo, write the bag, print the table."""
+    params = load_wheel_params(args.wheel_params)
+    plant_cfg = load_plant_config(args.plant)
+    trials = trials_from_mapping(load_yaml_file(args.trials).get("open_loop"),
+                                 f"{args.trials}: open_loop")
+    out = Path(args.out)
+    bag_dir = out / "bag"
+    if bag_dir.exists():
+        if not (bag_dir / "metadata.yaml").exists():
+            print(f"error: {bag_dir} exists but is not a bag written by this tool; "
+                  f"choose another --out", file=sys.stderr)
+            return 2
+        shutil.rmtree(bag_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    custom = {"tool": "hasel_wheel demo", "git_revision": git_revision(),
+              "seed": str(plant_cfg.seed),
+              "wheel_params.yaml": Path(args.wheel_params).read_text(),
+              "plant.yaml": Path(args.plant).read_text(),
+              "trials.yaml": Path(args.trials).read_text()}
+    rec = Recorder(bag_dir, custom_data=custom)
+    t0 = time.perf_counter()
+    exact, tick = [], []
+    try:
+        for spec in trials:
+            exact.append(run_trial(spec, params, dataclasses.replace(plant_cfg, switching="exact"),
+                                   rec, f"/exact/{spec.label}"))
+            spec_t = dataclasses.replace(spec, rule="after_measured")
+            tick.append(run_trial(spec_t, params, dataclasses.replace(plant_cfg, switching="tick"),
+                                  rec, f"/tick/{spec.label}"))
+    finally:
+        rec.close()
+    wall = time.perf_counter() - t0
+    sim = sum(r.spec.duration for r in exact + tick)
+    print(demo_table(exact, tick))
+    print()
+    print(f"Ticks: switching on the first 300 Hz tick after the angle, next actuator counted from")
+    print(f"the sector measured at switch-off (eq. (40)); this is what moves phi_a = 1 deg from 4.7")
+    print(f"to 3.8 rad/s (see README).")
+    print(f"Bag: {bag_dir} ({rec.bag.metadata()['rosbag2_bagfile_information']['message_count']}"
+          f" messages). {sim:.0f} s simulated in {wall:.1f} s wall.")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="hasel_wheel", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="command")
+    d = sub.add_parser("demo", help="open-loop trials vs. paper Table II, recorded to a bag")
+    d.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
+    d.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
+    d.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant.yaml")))
+    d.add_argument("--trials", default=str(packaged("hasel_wheel_mpc", "demo_open_loop.yaml")))
+    d.set_defaults(func=cmd_demo)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    if args.command is None:
+        args = ap.parse_args(["demo", *(argv or [])])
+    try:
+        return args.func(args)
+    except ParameterError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

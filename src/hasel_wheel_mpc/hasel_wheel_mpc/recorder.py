@@ -1,0 +1,70 @@
+"""Record the embedded runner's traffic to a bag, under the same topics and types as ROS.
+
+Each wheel or trial gets its own namespace (``/trial_01deg/telemetry`` ...), exactly as a
+namespaced launch would publish them, so one bag holds several runs side by side.
+"""
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+from typing import Mapping
+
+from hasel_wheel_driver import samples, topics
+from hasel_wheel_driver.bagio import BagWriter
+from hasel_wheel_driver.samples import Command, TelemetrySample
+from hasel_wheel_sim.wheel import HybridState
+
+
+def git_revision(cwd: str | Path | None = None) -> str:
+    """The current git commit (with '-dirty' when there are local changes), or 'unknown'."""
+    try:
+        rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True,
+                             text=True, timeout=5, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return rev + ("-dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+class Recorder:
+    """A bag plus the per-namespace topic bookkeeping of the runner."""
+
+    RECORDED = (topics.TELEMETRY, topics.JOINT_STATES, topics.COMMAND, topics.TRUE_STATE)
+
+    def __init__(self, path: str | Path, custom_data: Mapping[str, str] | None = None) -> None:
+        self.bag = BagWriter(path, custom_data=custom_data)
+        self._namespaces: set[str] = set()
+
+    def _ensure(self, ns: str) -> None:
+        if ns not in self._namespaces:
+            for tp in self.RECORDED:
+                self.bag.add_topic(topics.qualified(tp, ns), tp.type, tp.qos)
+            self._namespaces.add(ns)
+
+    @staticmethod
+    def _ns_time(t: float) -> int:
+        return int(round(t * 1e9))
+
+    def telemetry(self, ns: str, s: TelemetrySample) -> None:
+        """Record one device sample on ``telemetry`` and ``joint_states``."""
+        self._ensure(ns)
+        tn = self._ns_time(s.t)
+        self.bag.write(topics.qualified(topics.TELEMETRY, ns), samples.telemetry_msg(s), tn)
+        self.bag.write(topics.qualified(topics.JOINT_STATES, ns), samples.joint_state_msg(s), tn)
+
+    def command(self, ns: str, c: Command, t: float) -> None:
+        """Record an actuation command (sent, or latched by the firmware's own schedule)."""
+        self._ensure(ns)
+        self.bag.write(topics.qualified(topics.COMMAND, ns), samples.command_msg(c, t),
+                       self._ns_time(t))
+
+    def true_state(self, ns: str, t: float, x: HybridState) -> None:
+        """Record the simulator's true hybrid state (``sim/true_state``)."""
+        self._ensure(ns)
+        self.bag.write(topics.qualified(topics.TRUE_STATE, ns),
+                       samples.state_msg(t, x.xi1, x.xi2, x.q, x.act_counter, x.deact_counter,
+                                         x.eta), self._ns_time(t))
+
+    def close(self) -> None:
+        self.bag.close()

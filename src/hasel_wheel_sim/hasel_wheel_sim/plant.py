@@ -1,0 +1,140 @@
+"""The plant simulator: the hybrid model plus the effects a real wheel has.
+
+``Plant.step(command, dt) -> telemetry`` is the whole contract: it takes the command the
+host sends now (or None), advances the wheel by one 300 Hz firmware tick and returns what
+the host receives now (a :class:`TelemetrySample`, or None when a sample is lost or still
+in flight).  The same seed and configuration give bit-identical runs: every random draw
+comes from one ``numpy.random.Generator`` in a fixed order.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from hasel_wheel_driver.samples import ENCODER_COUNTS, Command, TelemetrySample
+
+from . import layout as L
+from .effects import EffectsConfig, effects_from_mapping
+from .params import ParameterError, WheelParams, load_yaml_file
+from .wheel import TICK, HybridWheel, SwitchMode
+
+COUNT = 2.0 * math.pi / ENCODER_COUNTS  # one encoder count [rad]
+HV_SUPPLY_V = 9000.0                    # HV converter output while HV is enabled [V]
+ACTUATOR_CURRENT_A = 3e-4               # supply current while an actuator charges [A]
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    """Seed, switching mode and effects of a plant (see ``config/plant.yaml``)."""
+
+    seed: int = 0
+    switching: SwitchMode = "exact"
+    effects: EffectsConfig = field(default_factory=EffectsConfig)
+
+
+def plant_config_from_mapping(data: Any, where: str = "plant") -> PlantConfig:
+    """Parse ``{seed: int, switching: exact|tick, effects: {...}}`` with clear errors."""
+    if data is None:
+        return PlantConfig()
+    if not isinstance(data, Mapping):
+        raise ParameterError(f"{where}: expected a mapping, got {type(data).__name__}")
+    unknown = sorted(set(data) - {"seed", "switching", "effects"})
+    if unknown:
+        raise ParameterError(f"{where}: unknown key(s) {unknown}; expected seed, switching, effects")
+    seed = data.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ParameterError(f"{where}.seed = {seed!r}: expected a non-negative integer")
+    switching = data.get("switching", "exact")
+    if switching not in ("exact", "tick"):
+        raise ParameterError(f"{where}.switching = {switching!r}: expected 'exact' (switch at the "
+                             f"crossing angle) or 'tick' (switch on the first 300 Hz tick after it)")
+    return PlantConfig(seed, switching, effects_from_mapping(data.get("effects"), f"{where}.effects"))
+
+
+def load_plant_config(path: str | Path) -> PlantConfig:
+    """Load the ``plant:`` section of a YAML file."""
+    data = load_yaml_file(path)
+    if not isinstance(data, Mapping) or "plant" not in data:
+        raise ParameterError(f"{path}: expected a top-level 'plant:' section")
+    return plant_config_from_mapping(data["plant"], f"{path}: plant")
+
+
+class Plant:
+    """A simulated wheel behind a simulated Teensy (sampling, encoder, link delays)."""
+
+    def __init__(self, params: WheelParams | None = None, config: PlantConfig | None = None,
+                 xi1: float = 0.0, xi2: float = 0.0) -> None:
+        self.config = config or PlantConfig()
+        self.rng = np.random.default_rng(self.config.seed)
+        fx = self.config.effects
+        self.extensions = fx.extensions(self.rng)
+        self.wheel = HybridWheel(params, self.extensions, self.config.switching, xi1, xi2)
+        self.sequence = 0
+        self.last_events = np.zeros((0, 4))
+        self._cmd_delay = fx.get("serial_latency", "command")
+        self._tlm_delay = fx.get("serial_latency", "telemetry")
+        self._noise = fx.get("encoder", "noise_std")
+        self._quantise = fx.on("encoder")
+        self._p_glitch = fx.get("encoder_glitches", "probability")
+        self._p_drop = fx.get("dropouts", "probability")
+        self._commands: deque[tuple[float, Command]] = deque()
+        self._samples: deque[TelemetrySample | None] = deque()
+
+    @property
+    def t(self) -> float:
+        """Simulated time [s]."""
+        return self.wheel.t
+
+    def open_loop(self, phi_a: float, phi_d: float, rule: str = "after_active",
+                  priming: int = 0, priming_phi_a: float = math.radians(3.0)) -> None:
+        """Let the (virtual) firmware run its sequential schedule (see ``HybridWheel.open_loop``)."""
+        self.wheel.open_loop(phi_a, phi_d, rule, priming, priming_phi_a)  # type: ignore[arg-type]
+
+    def step(self, command: Command | None = None, dt: float = TICK) -> TelemetrySample | None:
+        """Send ``command`` now, advance by dt [s] (one tick), return what arrives now."""
+        now = self.t
+        if command is not None:
+            self._commands.append((now + self._cmd_delay, command))
+        while self._commands and self._commands[0][0] <= now + 1e-12:
+            _, c = self._commands.popleft()
+            self.wheel.command(c.n_a, c.phi_a, c.phi_d, c.sequence)
+        self.last_events = self.wheel.advance(dt)
+        self._samples.append(self._sample())
+        # deliver the sample taken `telemetry latency` ago (rounded to whole ticks)
+        lag = int(math.ceil(self._tlm_delay / dt - 1e-9))
+        if len(self._samples) <= lag:
+            return None
+        return self._samples.popleft()
+
+    def _sample(self) -> TelemetrySample | None:
+        """What the firmware measures at this tick (None if the sample gets lost)."""
+        s = self.wheel.s
+        self.sequence += 1
+        # draws in a fixed order, whether or not they are used, keep runs reproducible
+        noise = self.rng.normal(0.0, self._noise) if self._noise > 0.0 else 0.0
+        glitch = self._p_glitch > 0.0 and self.rng.random() < self._p_glitch
+        glitch_count = int(self.rng.integers(ENCODER_COUNTS)) if glitch else 0
+        dropped = self._p_drop > 0.0 and self.rng.random() < self._p_drop
+        xi1 = float(s[L.S_XI1])
+        measured = xi1 + noise
+        counts = math.floor(measured / COUNT)
+        angle = counts * COUNT if self._quantise else measured
+        raw = counts % ENCODER_COUNTS
+        if glitch:
+            angle += (glitch_count - raw) * COUNT
+            raw = glitch_count
+        if dropped:
+            return None
+        q = int(s[L.S_Q])
+        eta_u = int(s[L.S_ETA])
+        return TelemetrySample(
+            t=self.t, device_time_us=int(round(self.t * 1e6)), sequence=self.sequence,
+            encoder_raw=int(raw), angle=angle, q=q, eta=eta_u % 16, eta_unwrapped=eta_u,
+            active_mask=(1 << (eta_u % 16)) if q else 0, hv_monitor=HV_SUPPLY_V,
+            current_monitor=ACTUATOR_CURRENT_A if q else 0.0,
+            last_command_sequence=max(int(s[L.S_CMD_SEQ]), 0))

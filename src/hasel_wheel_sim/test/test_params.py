@@ -1,0 +1,121 @@
+"""Parameter files: the defaults, and a clear error for every kind of bad file."""
+import math
+
+import pytest
+import yaml
+
+from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.params import (ParameterError, WheelParams, load_wheel_params,
+                                    wheel_params_from_mapping)
+from hasel_wheel_sim.plant import plant_config_from_mapping
+from hasel_wheel_mpc.cli import packaged
+
+
+def test_packaged_defaults_are_the_paper_values():
+    p = load_wheel_params(packaged("hasel_wheel_sim", "wheel_params.yaml"))
+    assert p == WheelParams()
+    assert (p.M, p.L, p.r, p.I33, p.tau_f) == (0.979, 0.642, 0.157, 0.0759, 0.0104)
+    assert (p.sigma1, p.sigma4, p.sigma6) == (1.214, -1.004, 22.357)
+
+
+def test_inertia_matches_model_notes(params):
+    # model-notes: J = L*I1 + L*M*r^2 + I33*r^2/L ~= 0.02301 (with the factor L)
+    J = params.L * params.I1 + params.L * params.M * params.r**2 + params.I33 * params.r**2 / params.L
+    assert J == pytest.approx(0.02301, abs=5e-6)
+    assert params.inertia * params.L == pytest.approx(J, rel=1e-12)
+    # friction alone: (r + L) tau_f / J ~= 0.36 rad/s^2
+    assert params.friction_torque / params.inertia == pytest.approx(0.361, abs=1e-3)
+
+
+def _write(tmp_path, data, raw=None):
+    f = tmp_path / "p.yaml"
+    f.write_text(raw if raw is not None else yaml.safe_dump(data))
+    return f
+
+
+def _good():
+    return {"wheel": WheelParams().to_yaml_dict()}
+
+
+@pytest.mark.parametrize("mutate, match", [
+    (lambda d: d["wheel"].pop("tau_f"), r"missing field\(s\) \['tau_f'\]"),
+    (lambda d: d["wheel"].update(mass={"value": 1.0, "unit": "kg"}), r"unknown field\(s\) \['mass'\]"),
+    (lambda d: d["wheel"]["r"].update(unit="mm"), r"'r' has unit 'mm'; expected 'm'"),
+    (lambda d: d["wheel"]["M"].update(value=-1.0), r"'M' = -1.0 is out of range; allowed range is \(0, 100\] kg"),
+    (lambda d: d["wheel"]["M"].update(value=float("nan")), r"'M' = nan is not finite"),
+    (lambda d: d["wheel"]["tau_f"].update(value=float("inf")), r"'tau_f' = inf is not finite"),
+    (lambda d: d["wheel"]["sigma5"].update(value=0.0), r"'sigma5' = 0.0 is out of range.*non-zero"),
+    (lambda d: d["wheel"]["sigma3"].update(value=0.0), r"'sigma3' = 0.0 is out of range; allowed range is \(0"),
+    (lambda d: d["wheel"]["L"].update(value="long"), r"'L' = 'long' is not a number"),
+    (lambda d: d["wheel"]["L"].update(value=True), r"'L' = True is not a number"),
+    (lambda d: d["wheel"].update(I1=0.007), r"'I1' must be written as \{value: <number>, unit: 'kg\*m\^2'\}"),
+    (lambda d: d.update(wheel=[1, 2]), r"expected a mapping of fields"),
+    (lambda d: d.pop("wheel"), r"expected a top-level 'wheel:' section"),
+])
+def test_bad_wheel_files_name_the_field_and_range(tmp_path, mutate, match):
+    data = _good()
+    mutate(data)
+    with pytest.raises(ParameterError, match=match):
+        load_wheel_params(_write(tmp_path, data))
+
+
+def test_unreadable_and_malformed_files(tmp_path):
+    with pytest.raises(ParameterError, match=r"cannot read parameter file"):
+        load_wheel_params(tmp_path / "missing.yaml")
+    with pytest.raises(ParameterError, match=r"not valid YAML"):
+        load_wheel_params(_write(tmp_path, None, raw="wheel: {M: [unclosed"))
+
+
+def test_nan_written_as_yaml_is_rejected(tmp_path):
+    raw = yaml.safe_dump(_good()).replace("value: 0.979", "value: .nan")
+    with pytest.raises(ParameterError, match=r"'M' = nan is not finite"):
+        load_wheel_params(_write(tmp_path, None, raw=raw))
+
+
+def test_constructor_validates_too():
+    with pytest.raises(ParameterError, match=r"'r' = 0.0 is out of range"):
+        WheelParams(r=0.0)
+    with pytest.raises(ParameterError, match="missing"):
+        wheel_params_from_mapping({})
+
+
+@pytest.mark.parametrize("effects, match", [
+    ({"wobble": {"enabled": True}}, r"unknown effect\(s\) \['wobble'\]"),
+    ({"viscous_drag": {"enabled": "yes"}}, r"viscous_drag: expected \{enabled: true\|false"),
+    ({"viscous_drag": {"enabled": True}}, r"missing field\(s\) \['coefficient'\]"),
+    ({"viscous_drag": {"enabled": True, "coefficient": {"value": 0.1, "unit": "N*m*s"}}},
+     r"'coefficient' has unit 'N\*m\*s'; expected 'N\*m\*s/rad'"),
+    ({"dropouts": {"enabled": True, "probability": {"value": 1.5, "unit": "1"}}},
+     r"'probability' = 1.5 is out of range"),
+    ({"actuator_gains": [1.0] * 15}, r"actuator_gains: expected a list of 16"),
+    ({"actuator_gains": [1.0] * 15 + [float("nan")]}, r"actuator_gains: expected a list of 16"),
+])
+def test_bad_effects_are_named(effects, match):
+    with pytest.raises(ParameterError, match=match):
+        effects_from_mapping(effects)
+
+
+def test_disabled_effect_may_omit_values_and_stays_off():
+    cfg = effects_from_mapping({"viscous_drag": {"enabled": False}})
+    assert not cfg.on("viscous_drag") and cfg.extensions().viscous == 0.0
+
+
+@pytest.mark.parametrize("plant, match", [
+    ({"seed": -1}, r"seed = -1: expected a non-negative integer"),
+    ({"seed": 1.5}, r"seed = 1.5"),
+    ({"switching": "fast"}, r"switching = 'fast': expected 'exact'"),
+    ({"speed": 1}, r"unknown key\(s\) \['speed'\]"),
+])
+def test_bad_plant_config(plant, match):
+    with pytest.raises(ParameterError, match=match):
+        plant_config_from_mapping(plant)
+
+
+def test_every_packaged_plant_file_loads():
+    from hasel_wheel_sim.plant import load_plant_config
+    nominal = load_plant_config(packaged("hasel_wheel_sim", "plant.yaml"))
+    realistic = load_plant_config(packaged("hasel_wheel_sim", "plant_realistic.yaml"))
+    assert nominal.effects.enabled == frozenset()
+    assert realistic.switching == "tick"
+    assert len(realistic.effects.enabled) == 10
+    assert math.isclose(realistic.effects.get("encoder", "noise_std"), 0.001)
