@@ -4,11 +4,21 @@ The model is written as plain scalar Python (``math`` on floats, numpy arrays in
 element by element), which numba compiles to machine code when it is installed.  Without
 numba the very same functions run interpreted: correct, only slower.  Set the environment
 variable ``HASEL_WHEEL_NO_JIT=1`` to force the interpreted path (useful for debugging).
+
+Compiled code is cached on disk.  numba invalidates a cached function only when its own
+source file changes, not when a constant it uses from another module does (our index
+layout lives in ``layout.py``), so the cache directory is keyed by a hash of every source
+file of the compiled core.
 """
 from __future__ import annotations
 
+import hashlib
 import os
+import tempfile
+from pathlib import Path
 from typing import Any, Callable
+
+_CORE_FILES = ("jit.py", "layout.py", "model.py", "integrator.py")
 
 try:  # pragma: no cover - exercised implicitly
     if os.environ.get("HASEL_WHEEL_NO_JIT"):
@@ -21,8 +31,43 @@ except ImportError:  # pragma: no cover
     HAVE_NUMBA = False
 
 
+def _cache_dir() -> str:
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for name in _CORE_FILES:
+        digest.update((here / name).read_bytes())
+    key = f"numba-{digest.hexdigest()[:16]}"
+    for base in (here / "__pycache__", Path(tempfile.gettempdir()) / "hasel_wheel_sim"):
+        try:
+            d = base / key
+            d.mkdir(parents=True, exist_ok=True)
+            probe = d / ".writable"
+            probe.touch()
+            return str(d)
+        except OSError:
+            continue
+    return ""
+
+
+if HAVE_NUMBA:  # pragma: no branch
+    _dir = _cache_dir()
+    if _dir:
+        numba.config.CACHE_DIR = _dir
+
+
 def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Compile ``fn`` with ``numba.njit(cache=True)`` when numba is available."""
     if HAVE_NUMBA:
-        return numba.njit(cache=True, nogil=True)(fn)
+        return numba.njit(cache=bool(numba.config.CACHE_DIR), nogil=True)(fn)
     return fn
+
+
+def jit_parallel(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Like :func:`jit`, with ``parallel=True``: ``prange`` loops run on all cores."""
+    if HAVE_NUMBA:
+        return numba.njit(cache=bool(numba.config.CACHE_DIR), nogil=True, parallel=True)(fn)
+    return fn
+
+
+#: ``numba.prange`` when compiled, ``range`` otherwise.
+prange = numba.prange if HAVE_NUMBA else range

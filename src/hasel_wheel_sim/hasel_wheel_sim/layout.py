@@ -25,7 +25,9 @@ P_VISCOUS = 15       # [N*m*s/rad]
 P_RISE_TIME = 16     # [s]
 P_RET_RATE = 17      # [1/s]
 P_RET_RECOVERY = 18  # [s]
-P_GAINS = 19         # 16 per-actuator gains [1]
+P_BAND_LO = 19       # |contact angle| band [rad] outside which the force law is < e^-60 of
+P_BAND_HI = 20       #   its peak and is taken as 0 (no effect on any double-precision result)
+P_GAINS = 21         # 16 per-actuator gains [1]
 P_SIZE = P_GAINS + 16
 
 # ---- state vector ---------------------------------------------------------------------

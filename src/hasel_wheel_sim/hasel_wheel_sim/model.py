@@ -85,10 +85,28 @@ def param_vector(p: WheelParams, ext: Extensions | None = None) -> np.ndarray:
     pv[L.P_RISE_TIME] = ext.rise_time
     pv[L.P_RET_RATE] = ext.retention_rate
     pv[L.P_RET_RECOVERY] = ext.retention_recovery
+    pv[L.P_BAND_LO], pv[L.P_BAND_HI] = force_band(p)
     if len(ext.gains) != N_ACTUATORS:
         raise ValueError(f"gains must have {N_ACTUATORS} entries, got {len(ext.gains)}")
     pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS] = ext.gains
     return pv
+
+
+#: The force law is taken as 0 where its bump is below exp(-BAND_EXPONENT) of its peak.
+BAND_EXPONENT = 60.0
+
+
+def force_band(p: WheelParams) -> tuple[float, float]:
+    """|contact angle| interval [rad] outside which the force law is < e^-60 (1e-26) of its peak.
+
+    The bump's exponent -s1 ln x - (ln x - s4)^2 / s5^2 is a parabola in ln x with its top at
+    c = s4 - s1 s5^2 / 2, so it is 60 below the top where |ln x - c| = sqrt(60) |s5|.  A torque
+    1e-26 times the peak one cannot change a double-precision sum with friction (~1e-2 N*m),
+    so skipping the evaluation there changes no result; it only saves the log, exp and sin.
+    """
+    c = p.sigma4 - p.sigma1 * p.sigma5**2 / 2.0
+    half = math.sqrt(BAND_EXPONENT) * abs(p.sigma5)
+    return math.exp(c - half), math.exp(c + half)
 
 
 @jit
@@ -107,7 +125,7 @@ def force_law(xi_c: float, xi2: float, phi_a: float, pv: np.ndarray) -> float:
     stays positive if the wheel rolls backwards.
     """
     x = abs(xi_c)
-    if x < TINY_ANGLE:
+    if x < TINY_ANGLE or x < pv[L.P_BAND_LO] or x > pv[L.P_BAND_HI]:
         return 0.0
     lx = math.log(x)
     dl = lx - pv[L.P_SIGMA4]
@@ -142,8 +160,8 @@ def acceleration(xi1: float, xi2: float, q: float, eta: float, phi_a: float, gai
     unless driven harder than friction.
     """
     tau = 0.0
-    if q != 0.0:
-        xi_c = xi1 - eta * SECTOR
+    xi_c = xi1 - eta * SECTOR
+    if q != 0.0 and pv[L.P_BAND_LO] <= abs(xi_c) <= pv[L.P_BAND_HI]:
         tau = gain * pv[L.P_R] * force_law(xi_c, xi2, phi_a, pv) * math.sin(xi_c)
         if pv[L.P_RISE_TIME] > 0.0:
             tau *= 1.0 - math.exp(-max(on_time, 0.0) / pv[L.P_RISE_TIME])

@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from hasel_wheel_sim import layout as L
-from hasel_wheel_sim.integrator import rk4, simulate_batch
+from hasel_wheel_sim.integrator import rk4, simulate_batch, simulate_batch_parallel
 from hasel_wheel_sim.model import SECTOR, acceleration, jump_map, param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.wheel import TICK, HybridWheel, initial_state, set_open_loop
@@ -135,7 +135,11 @@ def test_batch_equals_single_wheels_bit_for_bit(params):
         set_open_loop(s, pa, D(22))
     pvs = np.stack([param_vector(params.with_values(sigma6=20.0 + i)) for i in range(3)])
     out = np.zeros((3, n, 3))
+    out_par = np.zeros((3, n, 3))
+    states_par = states.copy()
     simulate_batch(states, pvs, TICK, n, out)
+    simulate_batch_parallel(states_par, pvs, TICK, n, out_par)
+    assert np.array_equal(out, out_par) and np.array_equal(states, states_par)
     for i, (pa, w0) in enumerate(cases):
         w = HybridWheel(params.with_values(sigma6=20.0 + i), xi2=w0)
         w.open_loop(pa, D(22))

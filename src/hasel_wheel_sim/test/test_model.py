@@ -140,3 +140,16 @@ def test_param_vector_layout():
     assert list(pv[L.P_GAINS:L.P_GAINS + 16]) == list(range(16))
     with pytest.raises(ValueError, match="16 entries"):
         param_vector(p, Extensions(gains=(1.0,)))
+
+
+def test_force_band_edges_are_negligible(pv):
+    # the law is skipped outside the band: there it is < 1e-25 of its peak
+    from hasel_wheel_sim.model import force_band
+    lo, hi = force_band(WheelParams())
+    assert math.radians(9) < lo < math.radians(11) and hi > SECTOR
+    peak = max(force_law(x, 0.0, 0.0, pv) for x in np.linspace(0.3, 0.42, 2000))
+    slack = pv.copy()
+    slack[L.P_BAND_LO], slack[L.P_BAND_HI] = 1e-12, 10.0      # evaluate everywhere
+    assert force_law(lo * (1 - 1e-9), 0.0, 0.0, slack) < 1e-25 * peak
+    assert force_law(lo * (1 - 1e-9), 0.0, 0.0, pv) == 0.0
+    assert force_law(lo * (1 + 1e-9), 0.0, 0.0, pv) > 0.0

@@ -1,0 +1,1 @@
+"""rclpy node modules of the driver package and helpers shared by every node (imports rclpy)."""

@@ -1,0 +1,70 @@
+"""Helpers shared by the rclpy nodes: QoS, message filling, diagnostics, parameter descriptors.
+
+This module imports rclpy and message packages; only node modules import it.
+"""
+from __future__ import annotations
+
+from typing import Any, Iterable, Mapping
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from hasel_wheel_driver.topics import QosSpec
+
+_RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
+_DURABILITY = {"volatile": DurabilityPolicy.VOLATILE,
+               "transient_local": DurabilityPolicy.TRANSIENT_LOCAL}
+_HISTORY = {"keep_last": HistoryPolicy.KEEP_LAST, "keep_all": HistoryPolicy.KEEP_ALL}
+
+
+def qos_profile(spec: QosSpec) -> QoSProfile:
+    """rclpy QoSProfile of a topic-table entry."""
+    return QoSProfile(history=_HISTORY[spec.history], depth=spec.depth,
+                      reliability=_RELIABILITY[spec.reliability],
+                      durability=_DURABILITY[spec.durability])
+
+
+def fill(msg: Any, data: Mapping[str, Any]) -> Any:
+    """Copy a message dict (as built by ``hasel_wheel_driver.samples``) into ``msg``; returns it.
+
+    Nested dicts fill nested messages (``header.stamp``); lists are assigned as they are.
+    """
+    for key, value in data.items():
+        if isinstance(value, Mapping):
+            fill(getattr(msg, key), value)
+        else:
+            setattr(msg, key, value)
+    return msg
+
+
+def diagnostic_array(stamp: Any, name: str, hardware_id: str, level: int, message: str,
+                     values: Mapping[str, str]) -> DiagnosticArray:
+    """One-status DiagnosticArray (level: DiagnosticStatus.OK/WARN/ERROR/STALE)."""
+    status = DiagnosticStatus(level=bytes([level]), name=name, message=message,
+                              hardware_id=hardware_id,
+                              values=[KeyValue(key=k, value=v) for k, v in values.items()])
+    arr = DiagnosticArray(status=[status])
+    arr.header.stamp = stamp
+    return arr
+
+
+def float_param(description: str, low: float, high: float, read_only: bool = False) -> ParameterDescriptor:
+    """Descriptor of a double parameter with an inclusive range."""
+    return ParameterDescriptor(description=description, read_only=read_only,
+                               floating_point_range=[FloatingPointRange(from_value=low, to_value=high,
+                                                                        step=0.0)])
+
+
+def int_param(description: str, low: int, high: int, read_only: bool = False) -> ParameterDescriptor:
+    """Descriptor of an integer parameter with an inclusive range."""
+    return ParameterDescriptor(description=description, read_only=read_only,
+                               integer_range=[IntegerRange(from_value=low, to_value=high, step=1)])
+
+
+def text_param(description: str, read_only: bool = True,
+               choices: Iterable[str] | None = None) -> ParameterDescriptor:
+    """Descriptor of a string (or bool) parameter; ``choices`` go into additional_constraints."""
+    extra = f"one of: {', '.join(choices)}" if choices else ""
+    return ParameterDescriptor(description=description, read_only=read_only,
+                               additional_constraints=extra)

@@ -1,0 +1,82 @@
+"""Static consistency of the colcon workspace (runs without ROS): entry points, launch files,
+package.xml dependencies, and rclpy kept out of the numerical core."""
+import ast
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[2]
+PY_PACKAGES = ["hasel_wheel_driver", "hasel_wheel_sim", "hasel_wheel_mpc"]
+
+
+def console_scripts(pkg):
+    tree = ast.parse((SRC / pkg / "setup.py").read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for k, v in zip(node.keys, node.values):
+                if isinstance(k, ast.Constant) and k.value == "console_scripts":
+                    return [e.value for e in v.elts]
+    return []
+
+
+@pytest.mark.parametrize("pkg", PY_PACKAGES)
+def test_every_console_script_has_a_main(pkg):
+    for entry in console_scripts(pkg):
+        name, target = [x.strip() for x in entry.split("=")]
+        module, func = target.split(":")
+        path = SRC / pkg / (module.replace(".", "/") + ".py")
+        assert path.is_file(), f"{entry}: no module file {path}"
+        funcs = {n.name for n in ast.parse(path.read_text()).body if isinstance(n, ast.FunctionDef)}
+        assert func in funcs, f"{entry}: {path} defines no {func}()"
+
+
+@pytest.mark.parametrize("pkg", PY_PACKAGES + ["hasel_wheel_msgs"])
+def test_package_xml_is_format_3_with_resource_marker(pkg):
+    root = ET.parse(SRC / pkg / "package.xml").getroot()
+    assert root.get("format") == "3" and root.findtext("name") == pkg
+    if pkg != "hasel_wheel_msgs":
+        assert (SRC / pkg / "resource" / pkg).is_file()
+        assert root.find("export/build_type").text == "ament_python"
+
+
+def test_launch_files_name_existing_executables():
+    scripts = {p: {e.split("=")[0].strip() for e in console_scripts(p)} for p in PY_PACKAGES}
+    launches = list(SRC.glob("*/launch/*.launch.py"))
+    assert launches
+    for f in launches:
+        text = f.read_text()
+        for pkg, exe in re.findall(r'package="([^"]+)",\s*executable="([^"]+)"', text):
+            assert exe in scripts[pkg], f"{f.name}: {pkg} has no executable {exe}"
+
+
+def test_imports_are_declared_in_package_xml():
+    ros_pkgs = {"rclpy", "std_msgs", "sensor_msgs", "diagnostic_msgs", "hasel_wheel_msgs",
+                "rcl_interfaces", "launch", "launch_ros"}
+    for pkg in PY_PACKAGES:
+        deps = {e.text for e in ET.parse(SRC / pkg / "package.xml").getroot()
+                if e.tag.endswith("depend")}
+        for f in (SRC / pkg).rglob("*.py"):
+            if "test" in f.parts:
+                continue
+            for node in ast.walk(ast.parse(f.read_text())):
+                names = []
+                if isinstance(node, ast.Import):
+                    names = [a.name.split(".")[0] for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                    names = [node.module.split(".")[0]]
+                for n in names:
+                    if n in ros_pkgs:
+                        assert n in deps, f"{f}: imports {n} but {pkg}/package.xml lacks it"
+                    if n in PY_PACKAGES and n != pkg:
+                        assert n in deps, f"{f}: imports {n} but {pkg}/package.xml lacks it"
+
+
+def test_rclpy_only_in_node_and_launch_modules():
+    for pkg in PY_PACKAGES:
+        for f in (SRC / pkg).rglob("*.py"):
+            rel = f.relative_to(SRC).as_posix()
+            if re.search(r"(^|/)(nodes?/|launch/|test/)|_node\.py$|launch\.py$", rel):
+                continue
+            assert not re.search(r"^\s*(import rclpy|from rclpy)", f.read_text(), re.M), rel

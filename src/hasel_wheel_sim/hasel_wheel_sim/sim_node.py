@@ -1,0 +1,127 @@
+"""sim_node: the plant simulator as a drop-in replacement for the driver node.
+
+Publishes the driver's topics with the driver's types (``telemetry``, ``joint_states``,
+``/diagnostics``) plus the ground truth ``sim/true_state``, and takes ``command`` like the
+driver does.  Runs in real time (``time_scale`` 1.0) or scaled time.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from hasel_wheel_msgs.msg import ActuationCommand, HybridStateEstimate, WheelTelemetry
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from hasel_wheel_driver import samples, topics
+from hasel_wheel_driver.nodes.ros_common import (diagnostic_array, fill, float_param, qos_profile,
+                                                  text_param)
+from hasel_wheel_sim.params import ParameterError, load_wheel_params
+from hasel_wheel_sim.plant import load_plant_config
+from hasel_wheel_sim.sim_runtime import SimRuntime
+
+_CONFIG = Path(__file__).resolve().parent / "config"
+
+
+class SimNode(Node):
+
+    def __init__(self) -> None:
+        super().__init__("hasel_wheel_sim")
+        wheel_file = self.declare_parameter(
+            "wheel_params_file", str(_CONFIG / "wheel_params.yaml"),
+            text_param("model parameter YAML (wheel: {name: {value, unit}})")).value
+        plant_file = self.declare_parameter(
+            "plant_file", str(_CONFIG / "plant.yaml"),
+            text_param("plant YAML: seed, switching mode, effects")).value
+        w0 = self.declare_parameter(
+            "initial_speed", 1.0, float_param("wheel speed at start [rad/s]", 0.0, 20.0, True)).value
+        scale = self.declare_parameter(
+            "time_scale", 1.0, float_param("simulated seconds per wall second [1]", 0.01, 100.0)).value
+        self.declare_parameter("frame_id", "wheel", text_param("frame_id of telemetry headers"))
+        self.declare_parameter("diagnostics_period", 1.0,
+                               float_param("period of /diagnostics [s]", 0.1, 60.0, True))
+        self.frame_id = self.get_parameter("frame_id").value
+        self.core = SimRuntime(load_wheel_params(wheel_file), load_plant_config(plant_file), w0, scale)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self.pub_tlm = self.create_publisher(WheelTelemetry, topics.TELEMETRY.name,
+                                             qos_profile(topics.TELEMETRY.qos))
+        self.pub_js = self.create_publisher(JointState, topics.JOINT_STATES.name,
+                                            qos_profile(topics.JOINT_STATES.qos))
+        self.pub_truth = self.create_publisher(HybridStateEstimate, topics.TRUE_STATE.name,
+                                               qos_profile(topics.TRUE_STATE.qos))
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS.name,
+                                              qos_profile(topics.DIAGNOSTICS.qos))
+        self.create_subscription(ActuationCommand, topics.COMMAND.name, self._on_command,
+                                 qos_profile(topics.COMMAND.qos))
+        self.t0_ns = self.get_clock().now().nanoseconds
+        self.create_timer(0.01, self._on_tick)
+        self.create_timer(self.get_parameter("diagnostics_period").value, self._on_diagnostics)
+        self.get_logger().info(f"simulating {wheel_file} with {plant_file} at x{scale:g}")
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        for p in params:
+            if p.name == "time_scale":
+                try:
+                    self.core.set_time_scale(p.value)
+                except ValueError as exc:
+                    return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _on_command(self, msg: ActuationCommand) -> None:
+        reason = self.core.submit(samples.Command(int(msg.n_a), float(msg.phi_a),
+                                                  float(msg.phi_d), int(msg.sequence)))
+        if reason:
+            self.get_logger().warn(f"command {msg.sequence} rejected, HV stays off for it: {reason}")
+
+    def _stamp_time(self, t: float) -> float:
+        """Header time [s]: ROS time at start plus simulated time."""
+        return self.t0_ns * 1e-9 + t
+
+    def _on_tick(self) -> None:
+        for out in self.core.run_until(time.monotonic()):
+            t = self._stamp_time(out.t)
+            if out.sample is not None:
+                s = out.sample
+                host = dataclasses.replace(s, t=self._stamp_time(s.t))
+                self.pub_tlm.publish(fill(WheelTelemetry(), samples.telemetry_msg(host, self.frame_id)))
+                self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
+            x = out.truth
+            self.pub_truth.publish(fill(HybridStateEstimate(), samples.state_msg(
+                t, x.xi1, x.xi2, x.q, x.act_counter, x.deact_counter, x.eta)))
+
+    def _on_diagnostics(self) -> None:
+        d = self.core.diagnostics()
+        level = DiagnosticStatus.WARN[0] if self.core.commands_rejected or self.core.overruns \
+            else DiagnosticStatus.OK[0]
+        self.pub_diag.publish(diagnostic_array(
+            self.get_clock().now().to_msg(), f"{self.get_fully_qualified_name()}: simulator",
+            "hasel_wheel_sim", level, "simulating", d))
+
+
+def main(args=None):
+    rclpy.init(args=args)
+
+    try:
+        node = SimNode()
+    except ParameterError as exc:
+        print(f"hasel_wheel_sim: {exc}")
+        rclpy.try_shutdown()
+        raise SystemExit(2)
+
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

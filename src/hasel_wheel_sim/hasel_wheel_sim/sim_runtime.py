@@ -1,0 +1,94 @@
+"""The sim node's core, without ROS: a plant paced against a wall clock.
+
+The node calls :meth:`SimRuntime.run_until` from a timer with the monotonic wall time; the
+runtime advances as many 300 Hz ticks as the time scale asks for and returns the samples to
+publish.  Commands are validated here; a rejected command is counted, reported and never
+reaches the wheel (so no HV is switched for it).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from hasel_wheel_driver.samples import Command, TelemetrySample
+
+from .params import WheelParams
+from .plant import Plant, PlantConfig
+from .wheel import TICK, CommandError, HybridState, validate_command
+
+#: At most this many ticks per call; beyond it the sim falls behind the wall clock (counted).
+MAX_TICKS_PER_CALL = 60
+
+
+@dataclass(frozen=True)
+class Output:
+    """What one tick gives the node: the host-side sample (None if lost) and the truth."""
+
+    t: float
+    sample: TelemetrySample | None
+    truth: HybridState
+
+
+class SimRuntime:
+    """A :class:`Plant` paced at ``time_scale`` simulated seconds per wall second."""
+
+    def __init__(self, params: WheelParams | None = None, config: PlantConfig | None = None,
+                 initial_speed: float = 1.0, time_scale: float = 1.0) -> None:
+        self.plant = Plant(params, config, xi1=0.0, xi2=initial_speed)
+        self.set_time_scale(time_scale)
+        self._wall0: float | None = None
+        self._sim0 = 0.0
+        self._pending: Command | None = None
+        self.commands_received = 0
+        self.commands_rejected = 0
+        self.samples_lost = 0
+        self.overruns = 0
+        self.last_rejection = ""
+
+    def set_time_scale(self, scale: float) -> None:
+        """Simulated seconds per wall second, in (0, 100]."""
+        if not (isinstance(scale, (int, float)) and math.isfinite(scale) and 0.0 < scale <= 100.0):
+            raise ValueError(f"time_scale = {scale!r}: expected a number in (0, 100]")
+        self.time_scale = float(scale)
+        self._wall0 = None  # re-anchor the pacing at the next call
+
+    def submit(self, command: Command) -> str | None:
+        """Queue a command for the next tick; return the rejection reason, or None if accepted."""
+        self.commands_received += 1
+        try:
+            validate_command(command.n_a, command.phi_a, command.phi_d)
+        except CommandError as exc:
+            self.commands_rejected += 1
+            self.last_rejection = str(exc)
+            return self.last_rejection
+        self._pending = command
+        return None
+
+    def step(self) -> Output:
+        """Advance exactly one tick, sending the queued command (if any)."""
+        cmd, self._pending = self._pending, None
+        sample = self.plant.step(cmd)
+        if sample is None:
+            self.samples_lost += 1
+        return Output(self.plant.t, sample, self.plant.wheel.state)
+
+    def run_until(self, wall_now: float) -> list[Output]:
+        """Advance to where the wall clock (monotonic seconds) says the simulation should be."""
+        if self._wall0 is None:
+            self._wall0, self._sim0 = wall_now, self.plant.t
+        target = self._sim0 + (wall_now - self._wall0) * self.time_scale
+        due = int(math.floor((target - self.plant.t) / TICK + 1e-9))
+        if due > MAX_TICKS_PER_CALL:
+            self.overruns += 1
+            due = MAX_TICKS_PER_CALL
+        return [self.step() for _ in range(max(due, 0))]
+
+    def diagnostics(self) -> dict[str, str]:
+        """Key/value health report for /diagnostics."""
+        s = self.plant.wheel.state
+        return {"sim_time_s": f"{self.plant.t:.3f}", "time_scale": f"{self.time_scale:g}",
+                "speed_rad_s": f"{s.xi2:.4f}", "hv_on": str(bool(s.q)),
+                "actuator": str(s.actuator), "commands_received": str(self.commands_received),
+                "commands_rejected": str(self.commands_rejected),
+                "last_rejection": self.last_rejection, "samples_lost": str(self.samples_lost),
+                "overruns": str(self.overruns)}

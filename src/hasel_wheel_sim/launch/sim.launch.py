@@ -1,0 +1,27 @@
+"""Launch the simulated wheel alone: ros2 launch hasel_wheel_sim sim.launch.py [namespace:=wheel0]."""
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.substitutions import FindPackageShare
+
+
+def generate_launch_description():
+    share = FindPackageShare("hasel_wheel_sim")
+    return LaunchDescription([
+        DeclareLaunchArgument("namespace", default_value="wheel0",
+                              description="namespace of the wheel's topics"),
+        DeclareLaunchArgument("params_file",
+                              default_value=PathJoinSubstitution([share, "config", "sim_node.yaml"]),
+                              description="ROS parameter file of sim_node"),
+        DeclareLaunchArgument("plant_file",
+                              default_value=PathJoinSubstitution([share, "config", "plant.yaml"]),
+                              description="plant YAML (seed, switching, effects)"),
+        DeclareLaunchArgument("time_scale", default_value="1.0",
+                              description="simulated seconds per wall second"),
+        Node(package="hasel_wheel_sim", executable="sim_node", name="sim",
+             namespace=LaunchConfiguration("namespace"), output="screen",
+             parameters=[LaunchConfiguration("params_file"),
+                         {"plant_file": LaunchConfiguration("plant_file"),
+                          "time_scale": LaunchConfiguration("time_scale")}]),
+    ])

@@ -1,0 +1,57 @@
+"""The sim node's core: pacing against a wall clock, scaled time, command rejection."""
+import math
+
+import pytest
+
+from hasel_wheel_driver.samples import Command
+from hasel_wheel_sim.sim_runtime import MAX_TICKS_PER_CALL, SimRuntime
+from hasel_wheel_sim.wheel import TICK
+
+
+def test_real_time_pacing_advances_300_ticks_per_second():
+    rt = SimRuntime(initial_speed=1.0)
+    assert rt.run_until(100.0) == []                  # anchors the clock
+    n = sum(len(rt.run_until(100.0 + k * 0.01)) for k in range(1, 101))
+    assert n == 300 and rt.plant.t == pytest.approx(1.0, abs=1e-9)
+
+
+def test_scaled_time():
+    rt = SimRuntime(time_scale=10.0)
+    rt.run_until(0.0)
+    total = sum(len(rt.run_until(k * 0.01)) for k in range(1, 11))
+    assert total == 300 and rt.plant.t == pytest.approx(1.0, abs=1e-9)
+    with pytest.raises(ValueError, match=r"time_scale = 0: expected a number in \(0, 100\]"):
+        rt.set_time_scale(0)
+
+
+def test_falling_behind_is_counted_not_hidden():
+    rt = SimRuntime()
+    rt.run_until(0.0)
+    assert len(rt.run_until(10.0)) == MAX_TICKS_PER_CALL and rt.overruns == 1
+
+
+@pytest.mark.parametrize("cmd, match", [
+    (Command(16, 0.05, 0.38), r"n_a = 16 is not an actuator index; expected an integer 0..15"),
+    (Command(3, math.nan, 0.38), r"phi_a = nan is not a finite angle"),
+    (Command(3, 0.05, 0.5), r"phi_d = 0.5 rad is outside \[-pi/8, pi/8\]"),
+    (Command(3, 0.3, 0.1), r"must be smaller than phi_d"),
+    (Command(3, -0.1, 0.1), r"straddle 0"),
+])
+def test_bad_commands_are_rejected_and_never_switch_hv(cmd, match):
+    rt = SimRuntime(initial_speed=2.0)
+    reason = rt.submit(cmd)
+    assert reason is not None
+    import re
+    assert re.search(match, reason)
+    outs = [rt.step() for _ in range(300)]
+    assert all(o.truth.q == 0 for o in outs)          # no target latched, HV stays off
+    assert rt.commands_rejected == 1 and rt.diagnostics()["commands_rejected"] == "1"
+
+
+def test_good_command_is_applied_and_echoed():
+    rt = SimRuntime(initial_speed=2.0)
+    assert rt.submit(Command(2, math.radians(3), math.radians(22), sequence=41)) is None
+    outs = [rt.step() for _ in range(300)]
+    assert any(o.truth.q == 1 for o in outs)
+    assert outs[-1].sample.last_command_sequence == 41
+    assert outs[0].t == pytest.approx(TICK)
