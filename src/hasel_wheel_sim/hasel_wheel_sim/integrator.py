@@ -242,6 +242,17 @@ def advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
 
 
 @jit
+def run_wheel(s: np.ndarray, pv: np.ndarray, h: float, n_ticks: int, out: np.ndarray,
+              ev: np.ndarray) -> None:
+    """Advance one wheel by ``n_ticks`` ticks; ``out`` (n_ticks, 3) gets (xi1, xi2, q) per tick."""
+    for k in range(n_ticks):
+        advance(s, pv, h, ev)
+        out[k, 0] = s[L.S_XI1]
+        out[k, 1] = s[L.S_XI2]
+        out[k, 2] = s[L.S_Q]
+
+
+@jit
 def simulate_batch(states: np.ndarray, pvs: np.ndarray, h: float, n_ticks: int,
                    out: np.ndarray) -> None:
     """Advance N wheels by ``n_ticks`` ticks of h seconds and record them.
@@ -251,13 +262,7 @@ def simulate_batch(states: np.ndarray, pvs: np.ndarray, h: float, n_ticks: int,
     """
     ev = np.zeros((L.EV_MAX_PER_TICK, 4))
     for i in range(states.shape[0]):
-        s = states[i]
-        pv = pvs[i]
-        for k in range(n_ticks):
-            advance(s, pv, h, ev)
-            out[i, k, 0] = s[L.S_XI1]
-            out[i, k, 1] = s[L.S_XI2]
-            out[i, k, 2] = s[L.S_Q]
+        run_wheel(states[i], pvs[i], h, n_ticks, out[i], ev)
 
 
 @jit_parallel
@@ -265,11 +270,4 @@ def simulate_batch_parallel(states: np.ndarray, pvs: np.ndarray, h: float, n_tic
                             out: np.ndarray) -> None:
     """:func:`simulate_batch` with the wheels spread over all cores (same results, bitwise)."""
     for i in prange(states.shape[0]):
-        ev = np.zeros((L.EV_MAX_PER_TICK, 4))
-        s = states[i]
-        pv = pvs[i]
-        for k in range(n_ticks):
-            advance(s, pv, h, ev)
-            out[i, k, 0] = s[L.S_XI1]
-            out[i, k, 1] = s[L.S_XI2]
-            out[i, k, 2] = s[L.S_Q]
+        run_wheel(states[i], pvs[i], h, n_ticks, out[i], np.zeros((L.EV_MAX_PER_TICK, 4)))
