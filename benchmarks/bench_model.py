@@ -69,7 +69,8 @@ def main() -> None:
     os.sched_setaffinity(0, {min(cores)})                       # one core from here on
     nominal = PlantConfig(seed=1)
     realistic = PlantConfig(seed=1, switching="tick", effects=effects_from_mapping(REALISTIC))
-    single_wheel(nominal, 1)
+    single_wheel(nominal, 1)                                    # warm-up
+    single_wheel(realistic, 1)
     off = single_wheel(nominal)
     on = single_wheel(realistic)
     print("hasel_wheel_sim model benchmark (one core)")

@@ -8,16 +8,18 @@ messages field by field.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 ENCODER_COUNTS = 1024
 MODE_ACCELERATE = 0
 MODE_BRAKE = 1
 
 
-@dataclass(frozen=True)
-class TelemetrySample:
-    """One 300 Hz device sample (fields as in ``WheelTelemetry.msg``; SI units)."""
+class TelemetrySample(NamedTuple):
+    """One 300 Hz device sample (fields as in ``WheelTelemetry.msg``; SI units).
+
+    Immutable; ``sample._replace(t=...)`` gives a copy with a field changed.
+    """
 
     t: float                    # sample time [s] (host receive time; simulated time in the sim)
     device_time_us: int         # device clock [us]
@@ -34,8 +36,7 @@ class TelemetrySample:
     fault_flags: int = 0
 
 
-@dataclass(frozen=True)
-class Command:
+class Command(NamedTuple):
     """Actuation input u = (n_a, phi_a [rad], phi_d [rad]) with its sequence number."""
 
     n_a: int

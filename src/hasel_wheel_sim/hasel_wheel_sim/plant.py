@@ -64,6 +64,31 @@ def load_plant_config(path: str | Path) -> PlantConfig:
     return plant_config_from_mapping(data["plant"], f"{path}: plant")
 
 
+class _Draws:
+    """Random numbers drawn from one generator in blocks of fixed size, in a fixed order.
+
+    A block holds, per tick, one standard normal and two uniforms, so the stream depends only
+    on the seed and the number of ticks, never on which effects consume the values.
+    """
+
+    BLOCK = 4096
+
+    def __init__(self, rng: np.random.Generator) -> None:
+        self.rng = rng
+        self.k = self.BLOCK
+
+    def next(self) -> tuple[float, float, float]:
+        """(standard normal, uniform, uniform) for one tick."""
+        if self.k == self.BLOCK:
+            self.normal = self.rng.standard_normal(self.BLOCK).tolist()
+            self.uniform = self.rng.random((self.BLOCK, 2)).tolist()
+            self.k = 0
+        k = self.k
+        self.k += 1
+        u = self.uniform[k]
+        return self.normal[k], u[0], u[1]
+
+
 class Plant:
     """A simulated wheel behind a simulated Teensy (sampling, encoder, link delays)."""
 
@@ -76,6 +101,7 @@ class Plant:
         self.wheel = HybridWheel(params, self.extensions, self.config.switching, xi1, xi2)
         self.sequence = 0
         self.last_events = np.zeros((0, 4))
+        self._draws = _Draws(self.rng)
         self._cmd_delay = fx.get("serial_latency", "command")
         self._tlm_delay = fx.get("serial_latency", "telemetry")
         self._noise = fx.get("encoder", "noise_std")
@@ -97,17 +123,21 @@ class Plant:
 
     def step(self, command: Command | None = None, dt: float = TICK) -> TelemetrySample | None:
         """Send ``command`` now, advance by dt [s] (one tick), return what arrives now."""
-        now = self.t
-        if command is not None:
-            self._commands.append((now + self._cmd_delay, command))
-        while self._commands and self._commands[0][0] <= now + 1e-12:
-            _, c = self._commands.popleft()
-            self.wheel.command(c.n_a, c.phi_a, c.phi_d, c.sequence)
+        commands = self._commands
+        if command is not None or commands:
+            now = self.wheel.s[L.S_T]
+            if command is not None:
+                commands.append((now + self._cmd_delay, command))
+            while commands and commands[0][0] <= now + 1e-12:
+                c = commands.popleft()[1]
+                self.wheel.command(c.n_a, c.phi_a, c.phi_d, c.sequence)
         self.last_events = self.wheel.advance(dt)
-        self._samples.append(self._sample())
-        # deliver the sample taken `telemetry latency` ago (rounded to whole ticks)
-        lag = int(math.ceil(self._tlm_delay / dt - 1e-9))
-        if len(self._samples) <= lag:
+        sample = self._sample()
+        if self._tlm_delay == 0.0:
+            return sample
+        # deliver the sample taken `telemetry latency` ago (rounded up to whole ticks)
+        self._samples.append(sample)
+        if len(self._samples) <= math.ceil(self._tlm_delay / dt - 1e-9):
             return None
         return self._samples.popleft()
 
@@ -115,26 +145,22 @@ class Plant:
         """What the firmware measures at this tick (None if the sample gets lost)."""
         s = self.wheel.s
         self.sequence += 1
-        # draws in a fixed order, whether or not they are used, keep runs reproducible
-        noise = self.rng.normal(0.0, self._noise) if self._noise > 0.0 else 0.0
-        glitch = self._p_glitch > 0.0 and self.rng.random() < self._p_glitch
-        glitch_count = int(self.rng.integers(ENCODER_COUNTS)) if glitch else 0
-        dropped = self._p_drop > 0.0 and self.rng.random() < self._p_drop
-        xi1 = float(s[L.S_XI1])
-        measured = xi1 + noise
+        z, u_glitch, u_drop = self._draws.next()
+        xi1 = s[L.S_XI1]
+        measured = xi1 + z * self._noise
         counts = math.floor(measured / COUNT)
         angle = counts * COUNT if self._quantise else measured
         raw = counts % ENCODER_COUNTS
-        if glitch:
+        if u_glitch < self._p_glitch:
+            glitch_count = int(u_glitch / self._p_glitch * ENCODER_COUNTS)  # uniform 0..1023
             angle += (glitch_count - raw) * COUNT
             raw = glitch_count
-        if dropped:
+        if u_drop < self._p_drop:
             return None
         q = int(s[L.S_Q])
         eta_u = int(s[L.S_ETA])
+        t = s[L.S_T]
         return TelemetrySample(
-            t=self.t, device_time_us=int(round(self.t * 1e6)), sequence=self.sequence,
-            encoder_raw=int(raw), angle=angle, q=q, eta=eta_u % 16, eta_unwrapped=eta_u,
-            active_mask=(1 << (eta_u % 16)) if q else 0, hv_monitor=HV_SUPPLY_V,
-            current_monitor=ACTUATOR_CURRENT_A if q else 0.0,
-            last_command_sequence=max(int(s[L.S_CMD_SEQ]), 0))
+            float(t), int(round(t * 1e6)), self.sequence, int(raw), float(angle), q, eta_u % 16,
+            eta_u, (1 << (eta_u % 16)) if q else 0, HV_SUPPLY_V,
+            ACTUATOR_CURRENT_A if q else 0.0, max(int(s[L.S_CMD_SEQ]), 0), 0)

@@ -6,7 +6,6 @@ driver does.  Runs in real time (``time_scale`` 1.0) or scaled time.
 """
 from __future__ import annotations
 
-import dataclasses
 import time
 from pathlib import Path
 
@@ -88,7 +87,7 @@ class SimNode(Node):
             t = self._stamp_time(out.t)
             if out.sample is not None:
                 s = out.sample
-                host = dataclasses.replace(s, t=self._stamp_time(s.t))
+                host = s._replace(t=self._stamp_time(s.t))
                 self.pub_tlm.publish(fill(WheelTelemetry(), samples.telemetry_msg(host, self.frame_id)))
                 self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
             x = out.truth

@@ -23,6 +23,8 @@ TICK = 1.0 / 300.0
 SwitchMode = Literal["exact", "tick"]
 SequentialRule = Literal["after_active", "after_measured"]
 
+_NO_EVENTS = np.zeros((0, 4))
+_NO_EVENTS.setflags(write=False)
 _RULES = {"after_active": L.AUTO_AFTER_ACTIVE, "after_measured": L.AUTO_AFTER_MEASURED}
 _MODES = {"exact": L.MODE_EXACT, "tick": L.MODE_TICK}
 
@@ -134,6 +136,8 @@ class HybridWheel:
     def advance(self, h: float = TICK) -> np.ndarray:
         """Advance by h seconds; return the events (k, 4): time, xi1, kind, eta."""
         n = advance(self.s, self.pv, h, self._ev)
+        if n == 0:
+            return _NO_EVENTS
         return self._ev[:min(n, L.EV_MAX_PER_TICK)].copy()
 
     # -- read-out -------------------------------------------------------------------------
