@@ -34,3 +34,11 @@ def test_tick_switching_with_eq40_targets_matches_the_cross_check(params, phi_a)
     v = open_loop_speed(params, Extensions(), math.radians(phi_a), 60.0, mode="tick",
                         rule="after_measured")
     assert steady_and_t90(v)[0] == pytest.approx(NOTES[phi_a][2], rel=0.02)
+
+
+def test_counting_from_the_actuator_of_interest_makes_ticks_faster_than_exact(params):
+    # no skipped pad, and each actuator stays on until the tick after 22 deg: more push
+    exact = open_loop_speed(params, Extensions(), math.radians(1), 60.0)
+    tick = open_loop_speed(params, Extensions(), math.radians(1), 60.0, mode="tick",
+                           rule="after_active")
+    assert steady_and_t90(tick)[0] > steady_and_t90(exact)[0] + 0.3
