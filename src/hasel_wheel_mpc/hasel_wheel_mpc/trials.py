@@ -39,7 +39,9 @@ class TrialSpec:
 
     @property
     def label(self) -> str:
-        return f"phi_a_{math.degrees(self.phi_a):04.1f}deg".replace(".", "p")
+        a = f"phi_a_{math.degrees(self.phi_a):04.1f}deg".replace(".", "p")
+        return a if abs(self.phi_d - math.radians(22.0)) < 1e-9 else \
+            a + f"_phi_d_{math.degrees(self.phi_d):04.1f}deg".replace(".", "p")
 
 
 @dataclass
@@ -96,9 +98,23 @@ def run_trial(spec: TrialSpec, params: WheelParams | None = None,
 _TRIAL_FIELDS = {
     "duration": FieldSpec("s", 0.0, 3600.0, doc="length of each trial"),
     "initial_speed": FieldSpec("rad/s", 0.0, 20.0, doc="wheel speed at t = 0"),
-    "phi_d": FieldSpec("rad", 0.0, math.pi / 8, high_closed=True, doc="deactivation angle"),
     "priming_phi_a": FieldSpec("rad", 0.0, math.pi / 8, low_closed=True, doc="priming phi_a"),
 }
+_ANGLE = FieldSpec("rad", 0.0, math.pi / 8, low_closed=True, high_closed=True)
+
+
+def _angles(data: Any, name: str, where: str) -> list[float]:
+    """``{value: x, unit: rad}`` (one angle) or ``{values: [...], unit: rad}`` (a list)."""
+    if not isinstance(data, Mapping) or data.get("unit") != "rad" or not (
+            ("value" in data) ^ ("values" in data)):
+        raise ParameterError(f"{where}.{name}: expected {{value: <rad>, unit: rad}} or "
+                             f"{{values: [<rad>, ...], unit: rad}}, got {data!r}")
+    raw = [data["value"]] if "value" in data else data["values"]
+    if not isinstance(raw, list) or not raw:
+        raise ParameterError(f"{where}.{name}.values: expected a non-empty list of angles [rad]")
+    key = f"{name}.values" if "values" in data else name
+    return [check_value(f"{key}[{i}]" if "values" in data else key, a, _ANGLE, where)
+            for i, a in enumerate(raw)]
 
 
 def trials_from_mapping(data: Any, where: str = "open_loop") -> list[TrialSpec]:
@@ -109,16 +125,19 @@ def trials_from_mapping(data: Any, where: str = "open_loop") -> list[TrialSpec]:
     """
     if not isinstance(data, Mapping):
         raise ParameterError(f"{where}: expected a mapping, got {type(data).__name__}")
-    known = set(_TRIAL_FIELDS) | {"phi_a", "priming_count", "sequential_rule"}
+    known = set(_TRIAL_FIELDS) | {"phi_a", "phi_d", "priming_count", "sequential_rule"}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ParameterError(f"{where}: unknown key(s) {unknown}; expected {sorted(known)}")
     vals = read_valued_mapping({k: data[k] for k in _TRIAL_FIELDS if k in data}, _TRIAL_FIELDS,
                                where, required=False)
-    pa = data.get("phi_a")
-    if (not isinstance(pa, Mapping) or pa.get("unit") != "rad"
-            or not isinstance(pa.get("values"), list) or not pa["values"]):
-        raise ParameterError(f"{where}.phi_a: expected {{values: [<rad>, ...], unit: rad}}, got {pa!r}")
+    phi_a = _angles(data.get("phi_a"), "phi_a", where)
+    phi_d = _angles(data.get("phi_d", {"value": math.radians(22.0), "unit": "rad"}), "phi_d", where)
+    if len(phi_d) == 1:
+        phi_d = phi_d * len(phi_a)
+    if len(phi_d) != len(phi_a):
+        raise ParameterError(f"{where}: phi_d has {len(phi_d)} values but phi_a has {len(phi_a)}; "
+                             f"give one phi_d for all trials or one per phi_a")
     priming = data.get("priming_count", 0)
     if isinstance(priming, bool) or not isinstance(priming, int) or not 0 <= priming <= 100:
         raise ParameterError(f"{where}.priming_count = {priming!r}: expected an integer 0..100")
@@ -126,12 +145,12 @@ def trials_from_mapping(data: Any, where: str = "open_loop") -> list[TrialSpec]:
     if rule not in ("after_active", "after_measured"):
         raise ParameterError(f"{where}.sequential_rule = {rule!r}: expected 'after_active' or "
                              f"'after_measured'")
-    spec_pa = FieldSpec("rad", 0.0, math.pi / 8, low_closed=True)
     out = []
-    for i, a in enumerate(pa["values"]):
-        phi_a = check_value(f"phi_a.values[{i}]", a, spec_pa, where)
-        out.append(TrialSpec(phi_a=phi_a, phi_d=vals.get("phi_d", math.radians(22.0)),
-                             duration=vals.get("duration", 60.0),
+    for i, (pa, pd) in enumerate(zip(phi_a, phi_d)):
+        if not pa < pd:
+            raise ParameterError(f"{where}: trial {i}: phi_a = {pa!r} rad must be smaller than "
+                                 f"phi_d = {pd!r} rad")
+        out.append(TrialSpec(phi_a=pa, phi_d=pd, duration=vals.get("duration", 60.0),
                              initial_speed=vals.get("initial_speed", 1.0), priming=priming,
                              priming_phi_a=vals.get("priming_phi_a", math.radians(3.0)),
                              rule=rule))

@@ -75,3 +75,20 @@ def test_bad_trials_file_is_a_clear_error(tmp_path, capsys):
     assert cli.main(["demo", "--out", str(tmp_path / "o"), "--trials", str(cfg)]) == 2
     err = capsys.readouterr().err
     assert "phi_a.values[0]" in err and "0.5" in err and "rad" in err
+
+
+def test_trials_take_paired_phi_a_phi_d():
+    from hasel_wheel_mpc.trials import trials_from_mapping
+    from hasel_wheel_sim.params import ParameterError
+    r = math.radians
+    specs = trials_from_mapping({"phi_a": {"values": [r(1), r(3)], "unit": "rad"},
+                                 "phi_d": {"values": [r(22), r(14)], "unit": "rad"},
+                                 "priming_count": 6})
+    assert [(s.phi_a, s.phi_d, s.priming) for s in specs] == [(r(1), r(22), 6), (r(3), r(14), 6)]
+    assert specs[1].label == "phi_a_03p0deg_phi_d_14p0deg"
+    with pytest.raises(ParameterError, match="phi_d has 3 values but phi_a has 2"):
+        trials_from_mapping({"phi_a": {"values": [r(1), r(3)], "unit": "rad"},
+                             "phi_d": {"values": [r(22)] * 3, "unit": "rad"}})
+    with pytest.raises(ParameterError, match="trial 0: phi_a = .* must be smaller than phi_d"):
+        trials_from_mapping({"phi_a": {"value": r(12), "unit": "rad"},
+                             "phi_d": {"value": r(11), "unit": "rad"}})
