@@ -18,5 +18,7 @@ setup(
     maintainer_email="dev@hasel-wheel.invalid",
     description="Serial link to the HASEL wheel's Teensy, topic table, message definitions and bag I/O.",
     license="Apache-2.0",
-    entry_points={"console_scripts": []},
+    entry_points={"console_scripts": [
+        "hasel_wheel_link = hasel_wheel_driver.link_cli:main",
+    ]},
 )

@@ -132,6 +132,20 @@ class HybridWheel:
         """Run the built-in sequential schedule (see :func:`set_open_loop`)."""
         set_open_loop(self.s, phi_a, phi_d, rule, priming, priming_phi_a)
 
+    def cut_hv(self) -> None:
+        """Switch every actuator off now and forget the latched and the pending command.
+
+        Not part of the paper's model: it is what HV-off, the watchdog and the emergency stop
+        do on the device.  The wheel then coasts (idle) until a new command is latched.
+        """
+        s = self.s
+        s[L.S_Q] = 0.0
+        s[L.S_ARMED] = 0.0
+        s[L.S_PEND] = 0.0
+        s[L.S_AUTO] = L.AUTO_OFF
+        s[L.S_THETA_ON] = math.inf
+        s[L.S_THETA_OFF] = math.inf
+
     # -- flow -----------------------------------------------------------------------------
     def advance(self, h: float = TICK) -> np.ndarray:
         """Advance by h seconds; return the events (k, 4): time, xi1, kind, eta."""

@@ -1,0 +1,291 @@
+"""The host end of the serial link (protocol v1), without ROS.
+
+:class:`DriverCore` owns the port and a reader thread, so nothing ever blocks a ROS executor.
+The thread decodes frames as they arrive and hands each telemetry sample to a callback.  It
+sends heartbeats and reconnects with backoff when the device disappears.  HV is switched off
+whenever there is doubt: on a stale or lost link it sends ESTOP and then HV(0), and
+:meth:`shutdown` does the same, ending on HV(0).
+"""
+from __future__ import annotations
+
+import math
+import select
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import serial
+
+from . import protocol as P
+from .samples import Command, TelemetrySample
+
+COUNT = 2.0 * math.pi / 1024.0
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    """Driver settings (times in seconds)."""
+
+    port: str
+    heartbeat_period: float = 0.02     # 50 Hz: 80 ms of slack inside the 100 ms watchdog
+    link_timeout: float = 0.25         # no telemetry this long: the link is stale
+    enable_hv_on_connect: bool = False  # send HV(1) after (re)connecting
+    backoff_min: float = 0.05
+    backoff_max: float = 0.25
+    ack_timeout: float = 0.1
+    device_config: P.Config | None = None  # sent after every (re)connect, before HV on
+
+
+@dataclass
+class LinkStats:
+    connects: int = 0
+    disconnects: int = 0
+    stale_events: int = 0
+    commands_sent: int = 0
+    commands_rejected_locally: int = 0
+    rejects: int = 0
+    write_errors: int = 0
+    samples: int = 0
+    latencies: list[float] = field(default_factory=list)  # frame bytes read -> handed over [s]
+
+
+class DriverCore:
+    """Serial link to the wheel.  Call :meth:`start`, then :meth:`shutdown` when done."""
+
+    def __init__(self, config: LinkConfig,
+                 on_sample: Callable[[TelemetrySample], None] | None = None,
+                 on_event: Callable[[str], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic,
+                 keep_latencies: int = 100_000) -> None:
+        self.config = config
+        self.on_sample = on_sample or (lambda s: None)
+        self.on_event = on_event or (lambda e: None)
+        self.clock = clock
+        self.stats = LinkStats()
+        self.decoder = P.FrameDecoder()
+        self.last_telemetry: P.Telemetry | None = None
+        self.hv_requested = False
+        self.connected = False
+        self.stale = False
+        self._keep = keep_latencies
+        self._ser: serial.Serial | None = None
+        self._counter = 0
+        self._write_lock = threading.Lock()
+        self._acks: dict[int, P.Message] = {}
+        self._ack_cv = threading.Condition()
+        self._running = False
+        self._closing = False
+        self._thread: threading.Thread | None = None
+        self._last_rx = 0.0
+        self._next_hb = 0.0
+        self._cmd_seq = 0
+
+    # -- public API ------------------------------------------------------------------------
+    def start(self) -> "DriverCore":
+        self._running = True
+        self._thread = threading.Thread(target=self._run, name="hasel-link", daemon=True)
+        self._thread.start()
+        return self
+
+    def send_command(self, cmd: Command) -> str | None:
+        """Validate and send u; return why it was refused (nothing sent), or None."""
+        reason = P.check_command(cmd.n_a, cmd.phi_a, cmd.phi_d)
+        if reason:
+            self.stats.commands_rejected_locally += 1
+            why = {P.R_N_A: f"n_a = {cmd.n_a} is outside 0..15",
+                   P.R_ANGLE: f"phi_a = {cmd.phi_a!r} / phi_d = {cmd.phi_d!r} rad must be finite "
+                              f"and within [-pi/8, pi/8]",
+                   P.R_ORDER: f"need phi_a < phi_d on one side of 0 (accelerate: 0 <= phi_a < "
+                              f"phi_d; brake: phi_a < phi_d <= 0), got {cmd.phi_a!r}, {cmd.phi_d!r}"}
+            return why[reason]
+        if not self.connected:
+            return "no link to the wheel"
+        seq = cmd.sequence or self._next_seq()
+        self._write(P.Command(seq, cmd.n_a, cmd.phi_a, cmd.phi_d))
+        self.stats.commands_sent += 1
+        return None
+
+    def set_hv(self, enable: bool) -> int:
+        """Ask for HV on or off; returns the frame counter (see :meth:`wait_ack`)."""
+        self.hv_requested = enable
+        return self._write(P.Hv(1 if enable else 0))
+
+    def estop(self) -> int:
+        self.hv_requested = False
+        return self._write(P.Estop())
+
+    def clear_estop(self) -> int:
+        return self._write(P.ClearEstop())
+
+    def wait_ack(self, counter: int, timeout: float | None = None) -> P.Message | None:
+        """The ACK/REJECT for host frame ``counter``, or None after ``timeout`` seconds."""
+        deadline = self.clock() + (self.config.ack_timeout if timeout is None else timeout)
+        with self._ack_cv:
+            while counter not in self._acks:
+                left = deadline - self.clock()
+                if left <= 0:
+                    return None
+                self._ack_cv.wait(left)
+            return self._acks[counter]
+
+    def shutdown(self) -> bool:
+        """Stop heartbeats, send ESTOP then HV(0) (the last frame), wait for their ACKs, close.
+
+        Returns True when the device acknowledged both.
+        """
+        self._closing = True
+        ok = False
+        if self.connected:
+            c1 = self.estop()
+            c2 = self._write(P.Hv(0))
+            ok = isinstance(self.wait_ack(c1), P.Ack) & isinstance(self.wait_ack(c2), P.Ack)
+        self._running = False
+        if self._thread and self._thread is not threading.current_thread():
+            self._thread.join(timeout=1.0)
+        self._close()
+        return ok
+
+    def diagnostics(self) -> dict[str, str]:
+        d = self.decoder.stats
+        lat = sorted(self.stats.latencies[-3000:])
+        p99 = lat[int(0.99 * (len(lat) - 1))] if lat else float("nan")
+        t = self.last_telemetry
+        return {"connected": str(self.connected), "stale": str(self.stale),
+                "hv_requested": str(self.hv_requested),
+                "hv_on": str(bool(t and t.hv_monitor > 0)),
+                "fault_flags": str(t.fault_flags if t else 0),
+                "frames": str(d.frames), "crc_errors": str(d.crc_errors),
+                "framing_errors": str(d.framing_errors + d.oversize + d.length_errors),
+                "sequence_gaps": str(d.sequence_gaps), "reconnects": str(self.stats.connects),
+                "device_rejects": str(self.stats.rejects),
+                "latency_p99_ms": f"{p99 * 1e3:.3f}"}
+
+    # -- internals ---------------------------------------------------------------------------
+    def _next_seq(self) -> int:
+        self._cmd_seq += 1
+        return self._cmd_seq
+
+    def _write(self, msg: P.Message) -> int:
+        with self._write_lock:
+            self._counter = (self._counter + 1) & 0xFFFF
+            counter = self._counter
+            ser = self._ser
+            if ser is None:
+                self.stats.write_errors += 1
+                return counter
+            try:
+                ser.write(P.encode(msg, counter))
+            except (serial.SerialException, OSError):
+                self.stats.write_errors += 1
+        return counter
+
+    def _open(self) -> bool:
+        try:
+            ser = serial.Serial(self.config.port, timeout=0, write_timeout=0.05, exclusive=True)
+        except (serial.SerialException, OSError, ValueError):
+            return False
+        self._ser = ser
+        self.decoder = P.FrameDecoder()
+        self.connected = True
+        self.stale = False
+        self.stats.connects += 1
+        now = self.clock()
+        self._last_rx = now
+        self._next_hb = now
+        self.on_event("connected")
+        if self.config.device_config is not None:
+            self._write(self.config.device_config)
+        if self.config.enable_hv_on_connect and not self._closing:
+            self.clear_estop()
+            self.set_hv(True)
+        return True
+
+    def _close(self) -> None:
+        ser, self._ser = self._ser, None
+        self.connected = False
+        if ser is not None:
+            try:
+                ser.close()
+            except (serial.SerialException, OSError):
+                pass
+
+    def _lost(self, why: str) -> None:
+        # the link is gone: try the safe sequence anyway, then close and reconnect
+        self.estop()
+        self._write(P.Hv(0))
+        self._close()
+        self.stats.disconnects += 1
+        self.on_event(f"link lost: {why}")
+
+    def _run(self) -> None:
+        backoff = self.config.backoff_min
+        while self._running:
+            if self._ser is None:
+                if self._open():
+                    backoff = self.config.backoff_min
+                else:
+                    time.sleep(backoff)
+                    backoff = min(2 * backoff, self.config.backoff_max)
+                continue
+            data = b""
+            try:  # only the I/O is guarded: a bug in decoding must not look like a lost link
+                ready, _, _ = select.select([self._ser.fileno()], [], [], 0.005)
+                if ready:
+                    data = self._ser.read(4096)
+                    if not data:
+                        raise serial.SerialException("device reports readiness but returned no data")
+            except (serial.SerialException, OSError) as exc:
+                if self._running:
+                    self._lost(str(exc))
+                continue
+            if data:
+                self._handle(data, self.clock())
+            now = self.clock()
+            if not self._closing and now >= self._next_hb:
+                self._next_hb = now + self.config.heartbeat_period
+                self._write(P.Heartbeat(int(now * 1e6)))
+            if not self.stale and now - self._last_rx > self.config.link_timeout:
+                self.stale = True
+                self.stats.stale_events += 1
+                self.estop()
+                self._write(P.Hv(0))
+                self.on_event("link stale: no telemetry; sent ESTOP and HV off")
+
+    def _handle(self, data: bytes, t_rx: float) -> None:
+        for frame in self.decoder.feed(data):
+            m = frame.message
+            if frame.type == P.TELEMETRY:
+                self._last_rx = t_rx
+                if self.stale:
+                    self.stale = False
+                    self.on_event("telemetry resumed")
+                    if self.config.enable_hv_on_connect and not self._closing:
+                        self.clear_estop()
+                        self.set_hv(True)
+                self.last_telemetry = m
+                sample = TelemetrySample(
+                    t=m.device_time_us * 1e-6, device_time_us=m.device_time_us,
+                    sequence=m.sample_seq, encoder_raw=m.encoder_raw,
+                    angle=m.encoder_unwrapped * COUNT, q=m.q, eta=m.eta,
+                    eta_unwrapped=m.eta_unwrapped, active_mask=m.active_mask,
+                    hv_monitor=m.hv_monitor, current_monitor=m.current_monitor,
+                    last_command_sequence=m.last_command_seq, fault_flags=m.fault_flags)
+                self.on_sample(sample)
+                self.stats.samples += 1
+                lat = self.stats.latencies
+                lat.append(self.clock() - t_rx)
+                if len(lat) > self._keep:
+                    del lat[: len(lat) - self._keep]
+            elif frame.type in (P.ACK, P.REJECT):
+                if frame.type == P.REJECT:
+                    self.stats.rejects += 1
+                    self.on_event(f"device rejected frame {m.rejected_counter} "
+                                  f"(type 0x{m.rejected_type:02x}): reason {m.reason}")
+                key = m.acked_counter if frame.type == P.ACK else m.rejected_counter
+                with self._ack_cv:
+                    self._acks[key] = m
+                    if len(self._acks) > 1000:
+                        for k in list(self._acks)[:500]:
+                            del self._acks[k]
+                    self._ack_cv.notify_all()

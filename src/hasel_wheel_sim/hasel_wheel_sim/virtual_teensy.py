@@ -1,0 +1,399 @@
+"""A virtual Teensy: the plant behind a real pseudo-terminal, speaking protocol v1.
+
+:class:`Firmware` is the device logic of ``docs/protocol.md`` section 4 (pure, no I/O):
+HV interlock, command latching at switch-off, tick-sampled switching, watchdog, maximum
+on-time, emergency stop.  :class:`VirtualTeensy` runs it at 300 Hz (real or scaled time) on a
+pty, published under a stable symlink like ``/dev/serial/by-id/...``, and injects link faults
+on demand: byte corruption, dropped bytes, stalls and unplug/replug.
+"""
+from __future__ import annotations
+
+import math
+import os
+import random
+import select
+import threading
+import time
+import tty
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hasel_wheel_driver import protocol as P
+
+from . import layout as L
+from .integrator import advance
+from .plant import COUNT, Plant
+from .wheel import TICK
+
+
+class Firmware:
+    """Device behaviour (protocol section 4) around a :class:`Plant` in tick-switching mode."""
+
+    def __init__(self, plant: Plant) -> None:
+        if plant.config.switching != "tick":
+            raise ValueError("the firmware switches on ticks: build the plant with switching='tick'")
+        self.plant = plant
+        self.reset()
+
+    def reset(self) -> None:
+        """Power-up state: HV off, nothing latched, estop clear, default configuration."""
+        self.plant.wheel.cut_hv()
+        self.config = P.Config()
+        self.hv_enabled = False
+        self.estop = False
+        self.faults = 0
+        self.counter = 0
+        self.sample_seq = 0
+        self.last_host_t = self.plant.t
+        self.watchdog_trips = 0
+        self.hv_off_t: float | None = None  # simulated time HV was last switched off
+
+    # -- host frames --------------------------------------------------------------------
+    def receive(self, frame: P.Frame) -> P.Message:
+        """Handle one valid host frame; return the ACK or REJECT to send."""
+        self.last_host_t = self.plant.t
+        m = frame.message
+        seq = m.command_seq if isinstance(m, P.Command) else 0
+
+        def reject(reason: int) -> P.Reject:
+            if isinstance(m, P.Command):
+                self.faults |= P.F_REJECTED
+            return P.Reject(frame.type, frame.counter, seq, reason)
+
+        if isinstance(m, P.Command):
+            reason = P.check_command(m.n_a, m.phi_a, m.phi_d)
+            if reason:
+                return reject(reason)
+            if self.estop:
+                return reject(P.R_ESTOP)
+            if not self.hv_enabled:
+                return reject(P.R_HV_DISABLED)
+            self.plant.wheel.command(m.n_a, float(m.phi_a), float(m.phi_d), m.command_seq)
+            self.faults &= ~(P.F_REJECTED | P.F_MAX_ON)
+        elif isinstance(m, P.Hv):
+            if m.enable:
+                if self.estop:
+                    return reject(P.R_ESTOP)
+                self.hv_enabled = True
+                self.faults &= ~P.F_WATCHDOG
+            else:
+                self._hv_off()
+        elif isinstance(m, P.Estop):
+            self._hv_off()
+            self.estop = True
+            self.faults |= P.F_ESTOP
+        elif isinstance(m, P.ClearEstop):
+            self.estop = False
+            self.faults &= ~P.F_ESTOP
+        elif isinstance(m, P.Config):
+            if P.check_config(m):
+                return reject(P.R_CONFIG)
+            self.config = m
+        return P.Ack(frame.type, frame.counter, seq)
+
+    def _hv_off(self) -> None:
+        if self.hv_enabled or self.plant.wheel.s[L.S_Q]:
+            self.hv_off_t = self.plant.t
+        self.hv_enabled = False
+        self.plant.wheel.cut_hv()
+
+    # -- ticks --------------------------------------------------------------------------
+    def tick(self) -> P.Telemetry:
+        """One firmware tick: watchdog, maximum on-time, physics, then the telemetry sample."""
+        c = self.config
+        if self.hv_enabled and self.plant.t - self.last_host_t >= c.watchdog_ms / 1000.0 - 1e-9:
+            self._hv_off()
+            self.faults |= P.F_WATCHDOG
+            self.watchdog_trips += 1
+        s = self.plant.wheel.s
+        if s[L.S_Q] and s[L.S_ON_TIME] >= c.max_on_ms / 1000.0:
+            self.plant.wheel.cut_hv()
+            self.faults |= P.F_MAX_ON
+        sample = self.plant.step(None, 1.0 / c.telemetry_rate_hz)
+        self.sample_seq += 1
+        xi1 = s[L.S_XI1]
+        q = int(s[L.S_Q])
+        eta_u = int(s[L.S_ETA])
+        angle = sample.angle if sample is not None else xi1
+        return P.Telemetry(
+            device_time_us=int(round(self.plant.t * 1e6)), sample_seq=self.sample_seq,
+            encoder_raw=int(math.floor(angle / COUNT)) % 1024,
+            encoder_unwrapped=int(math.floor(angle / COUNT)), q=q, eta=eta_u % 16,
+            eta_unwrapped=eta_u, active_mask=(1 << (eta_u % 16)) if q else 0,
+            hv_monitor=9000.0 if self.hv_enabled else 0.0, current_monitor=3e-4 if q else 0.0,
+            last_command_seq=max(int(s[L.S_CMD_SEQ]), 0), fault_flags=self.faults)
+
+    def next_counter(self) -> int:
+        self.counter = (self.counter + 1) & 0xFFFF
+        return self.counter
+
+
+@dataclass
+class LinkFaults:
+    """Faults injected on the device -> host byte stream (probabilities per byte)."""
+
+    corrupt: float = 0.0   # a byte is XORed with a random non-zero value
+    drop: float = 0.0      # a byte is lost
+    seed: int = 0
+
+
+@dataclass
+class SentFrame:
+    """Ground truth of one frame the device wrote: what it was and whether it was damaged."""
+
+    counter: int
+    type: int
+    intact: bool
+    message: P.Message
+
+
+@dataclass
+class HostFrame:
+    t: float            # simulated time of arrival [s]
+    frame: P.Frame
+
+
+@dataclass
+class _State:
+    running: bool = False
+    plugged: bool = False
+    stall_until: float = 0.0
+
+
+class VirtualTeensy:
+    """Run :class:`Firmware` on a pty at ``time_scale`` x real time; ``link`` is the stable path."""
+
+    def __init__(self, firmware: Firmware, link: str | os.PathLike, time_scale: float = 1.0,
+                 faults: LinkFaults | None = None) -> None:
+        self.fw = firmware
+        self.link = Path(link)
+        self.time_scale = time_scale
+        self.faults = faults or LinkFaults()
+        self._rng = random.Random(self.faults.seed)
+        self.decoder = P.FrameDecoder()
+        self.sent: list[SentFrame] = []
+        self.received: list[HostFrame] = []
+        self.write_drops = 0
+        self._state = _State()
+        self._lock = threading.Lock()
+        self._master = -1
+        self._thread: threading.Thread | None = None
+        self._prev_delim_intact = True
+
+    # -- lifecycle ----------------------------------------------------------------------
+    def start(self) -> "VirtualTeensy":
+        # load the compiled core now (a throwaway tick on a copy), not on the first live tick
+        w = self.fw.plant.wheel
+        advance(w.s.copy(), w.pv, TICK, np.zeros((L.EV_MAX_PER_TICK, 4)))
+        self.plug()
+        self._state.running = True
+        self._thread = threading.Thread(target=self._run, name="virtual-teensy", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._state.running = False
+        if self._thread:
+            self._thread.join(timeout=5)
+        self.unplug()
+
+    def plug(self) -> None:
+        """Create a new pty and point the stable link at it (a device appearing on USB).
+
+        Plugging in powers the device up: the firmware restarts with HV off.
+        """
+        with self._lock:
+            master, slave = os.openpty()
+            tty.setraw(slave)
+            os.set_blocking(master, False)
+            name = os.ttyname(slave)
+            os.close(slave)        # the host opens it by name; keeps the pty alive via master
+            tmp = self.link.with_suffix(".tmp")
+            if tmp.exists() or tmp.is_symlink():
+                tmp.unlink()
+            tmp.symlink_to(name)
+            tmp.replace(self.link)
+            self._master = master
+            self.decoder = P.FrameDecoder()
+            self.fw.reset()
+            self._state.plugged = True
+
+    def unplug(self) -> None:
+        """Remove the device: the link disappears and the host's port fails."""
+        with self._lock:
+            self._state.plugged = False
+            if self.link.is_symlink():
+                self.link.unlink()
+            if self._master >= 0:
+                os.close(self._master)
+                self._master = -1
+
+    def stall(self, seconds: float) -> None:
+        """Stop talking and listening for ``seconds`` of wall time (a hung USB stack)."""
+        self._state.stall_until = time.monotonic() + seconds
+
+    # -- the device loop ------------------------------------------------------------------
+    def _run(self) -> None:
+        period = TICK / self.time_scale
+        next_tick = time.monotonic()
+        while self._state.running:
+            now = time.monotonic()
+            if now >= next_tick:
+                next_tick += period
+                if next_tick < now - 1.0:          # far behind (debugger, suspend): re-anchor
+                    next_tick = now + period
+                with self._lock:
+                    if self._state.plugged and now >= self._state.stall_until:
+                        self._read_host()
+                        tel = self.fw.tick()
+                        self._send(tel)
+                    elif self._state.plugged:
+                        self.fw.tick()             # physics go on; the device is mute
+                continue
+            fd = self._master
+            timeout = max(0.0, min(next_tick - now, 0.002))
+            if fd >= 0 and self._state.plugged and now >= self._state.stall_until:
+                try:
+                    select.select([fd], [], [], timeout)
+                except (OSError, ValueError):
+                    time.sleep(timeout)
+                with self._lock:
+                    if self._state.plugged:
+                        self._read_host()
+            else:
+                time.sleep(timeout)
+
+    def _read_host(self) -> None:
+        try:
+            data = os.read(self._master, 4096)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:           # the host side is closed: nothing to read
+            return
+        for frame in self.decoder.feed(data):
+            self.received.append(HostFrame(self.fw.plant.t, frame))
+            self._send(self.fw.receive(frame))
+
+    def _send(self, msg: P.Message) -> None:
+        """Encode, damage as configured, write; record whether the frame arrives intact.
+
+        A frame is intact when none of its bytes (its delimiter included) was damaged and the
+        previous frame's delimiter arrived (else the two run together and both are lost).
+        """
+        counter = self.fw.next_counter()
+        wire = P.encode(msg, counter)
+        damaged = False
+        delim_ok = True
+        f = self.faults
+        if f.corrupt or f.drop:
+            out = bytearray()
+            last = len(wire) - 1
+            for i, b in enumerate(wire):
+                r = self._rng.random()
+                if r < f.drop + f.corrupt:
+                    damaged = True
+                    delim_ok = delim_ok and i != last
+                    if r < f.drop:
+                        continue
+                    b ^= self._rng.randrange(1, 256)
+                out.append(b)
+            wire = bytes(out)
+        try:
+            n = os.write(self._master, wire) if self._master >= 0 else 0
+        except (BlockingIOError, OSError):
+            n = 0
+        if n < len(wire):
+            self.write_drops += 1
+            damaged, delim_ok = True, False
+        self.sent.append(SentFrame(counter, P.TYPE_OF[type(msg)],
+                                   not damaged and self._prev_delim_intact, msg))
+        self._prev_delim_intact = delim_ok
+
+
+@dataclass
+class DeviceReport:
+    """What a virtual Teensy process saw, returned when it stops."""
+
+    sent: list[SentFrame]
+    received: list[HostFrame]
+    hv_enabled: bool
+    estop: bool
+    faults: int
+    hv_off_t: float | None
+    t: float
+    speed: float
+    write_drops: int
+
+
+def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> None:
+    vt = VirtualTeensy(Firmware(Plant(params, plant_config, xi2=w0)), link, time_scale, faults).start()
+    while True:
+        cmd, arg = conn.recv()
+        if cmd == "unplug":
+            vt.unplug()
+        elif cmd == "plug":
+            vt.plug()
+        elif cmd == "stall":
+            vt.stall(arg)
+        elif cmd == "status":
+            with vt._lock:
+                conn.send({"t": vt.fw.plant.t, "hv_enabled": vt.fw.hv_enabled,
+                           "speed": float(vt.fw.plant.wheel.s[L.S_XI2]),
+                           "received": len(vt.received), "sent": len(vt.sent)})
+            continue
+        elif cmd == "stop":
+            vt.stop()
+            conn.send(DeviceReport(vt.sent, vt.received, vt.fw.hv_enabled, vt.fw.estop,
+                                   vt.fw.faults, vt.fw.hv_off_t, vt.fw.plant.t,
+                                   float(vt.fw.plant.wheel.s[L.S_XI2]), vt.write_drops))
+            return
+        conn.send(None)
+
+
+class DeviceProcess:
+    """A :class:`VirtualTeensy` in its own process, as a real device would be (no shared GIL).
+
+    Control it with :meth:`unplug`, :meth:`plug`, :meth:`stall`, :meth:`status`; :meth:`stop`
+    returns a :class:`DeviceReport` with the ground truth of every frame.
+    """
+
+    def __init__(self, link: str | os.PathLike, plant_config=None, params=None, w0: float = 0.0,
+                 time_scale: float = 1.0, faults: LinkFaults | None = None) -> None:
+        import multiprocessing as mp
+
+        from .plant import PlantConfig
+        ctx = mp.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self.link = Path(link)
+        self._proc = ctx.Process(target=_device_main, daemon=True,
+                                 args=(child, plant_config or PlantConfig(switching="tick"), params,
+                                       w0, str(link), time_scale, faults))
+        self._proc.start()
+        t_end = time.monotonic() + 30.0
+        while not self.link.is_symlink():      # the child compiles and plugs in
+            if time.monotonic() > t_end or not self._proc.is_alive():
+                raise RuntimeError("the virtual Teensy process did not come up")
+            time.sleep(0.01)
+
+    def _call(self, cmd: str, arg=None):
+        self._conn.send((cmd, arg))
+        return self._conn.recv()
+
+    def unplug(self) -> None:
+        self._call("unplug")
+
+    def plug(self) -> None:
+        self._call("plug")
+
+    def stall(self, seconds: float) -> None:
+        self._call("stall", seconds)
+
+    def status(self) -> dict:
+        return self._call("status")
+
+    def stop(self) -> DeviceReport:
+        report = self._call("stop")
+        self._proc.join(timeout=5)
+        return report

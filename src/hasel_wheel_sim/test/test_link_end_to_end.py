@@ -1,0 +1,198 @@
+"""End to end over a real pseudo-terminal: the virtual Teensy (plant + firmware) and the
+driver core (pyserial), 60 s of simulated wheel time at 300 Hz, with and without faults."""
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hasel_wheel_driver import protocol as P
+from hasel_wheel_driver.link import DriverCore, LinkConfig
+from hasel_wheel_driver.samples import Command
+from hasel_wheel_sim.virtual_teensy import DeviceProcess, LinkFaults
+
+SCALE = 5.0               # simulated seconds per wall second
+# the device's watchdog counts device (simulated) time: at 5x, 100 ms would be 20 ms of wall
+# time, tighter than a loaded 2-core machine wakes a thread.  Scaled runs configure 500 ms
+# (100 ms of wall time); the watchdog test itself runs in real time with the default 100 ms.
+SCALED_CONFIG = P.Config(telemetry_rate_hz=300, watchdog_ms=500, max_on_ms=2000, drain_mode=0)
+D = math.radians
+
+
+class Sequencer:
+    """Host-side open loop: at every switch-on, send u for the next pad (one command per cycle)."""
+
+    def __init__(self):
+        self.core = None
+        self.samples = []
+        self.sent = []          # (sample index at sending, seq, target pad)
+        self.prev_q = 0
+
+    def on_sample(self, s):
+        self.samples.append(s)
+        if s.q == 1 and self.prev_q == 0:
+            self.send((s.eta_unwrapped + 1) % 16)
+        self.prev_q = s.q
+
+    def send(self, pad):
+        seq = len(self.sent) + 1
+        if self.core.send_command(Command(pad, D(3), D(22), seq)) is None:
+            self.sent.append((len(self.samples), seq, pad))
+
+
+def start(tmp_path, faults=None, w0=2.0, scale=SCALE):
+    link = tmp_path / "usb-Teensyduino_HASEL_wheel-if00"
+    vt = DeviceProcess(link, w0=w0, time_scale=scale, faults=faults)
+    seq = Sequencer()
+    core = DriverCore(LinkConfig(str(link), heartbeat_period=0.02, link_timeout=0.25,
+                                 enable_hv_on_connect=True,
+                                 device_config=SCALED_CONFIG if scale != 1.0 else None),
+                      on_sample=seq.on_sample)
+    seq.core = core
+    core.start()
+    return vt, core, seq
+
+
+def wait(cond, timeout):
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        if cond():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+def run_sim_seconds(vt, core, seq, seconds):
+    assert wait(lambda: seq.samples and seq.samples[-1].hv_monitor > 0, 3.0), "HV never came on"
+    seq.send((seq.samples[-1].eta_unwrapped + 1) % 16)
+    t_end = vt.status()["t"] + seconds
+    while vt.status()["t"] < t_end:
+        time.sleep(0.05)
+        if seq.samples and not any(s.q for s in seq.samples[-150:]) and len(seq.samples) > 150:
+            seq.send((seq.samples[-1].eta_unwrapped + 1) % 16)      # lost the beat: restart
+
+
+def test_no_faults_no_frame_lost_and_every_command_latched_at_switch_off(tmp_path):
+    vt, core, seq = start(tmp_path)
+    try:
+        run_sim_seconds(vt, core, seq, 60.0)
+        speed = vt.status()["speed"]
+    finally:
+        core.shutdown()
+        rep = vt.stop()
+    st = core.decoder.stats
+    telemetry_sent = [f for f in rep.sent if f.type == P.TELEMETRY]
+    assert st.dropped == 0 and st.sequence_gaps == 0 and rep.write_drops == 0
+    # every frame up to the host's shutdown arrived, in order; only those still in flight
+    # when it stopped reading (a few ms at 1500 frames/s) were never read
+    assert [s.sequence for s in seq.samples] == list(range(1, len(seq.samples) + 1))
+    assert len(seq.samples) >= 60 * 300 and 0 <= len(telemetry_sent) - len(seq.samples) <= 15
+    assert speed > 2.5 and core.stats.rejects == 0              # driven, nothing refused
+    # protocol rule 3: a command sent during an activation is latched on the tick that
+    # actuator switches off; one sent while the wheel idles, on the next tick it arrives
+    s = seq.samples
+    checked = idle = 0
+    for k, seq_no, pad in seq.sent[:-1]:
+        if s[k - 1].q == 1:
+            off = next(i for i in range(k, len(s)) if s[i].q == 0)
+            assert s[off].last_command_sequence == seq_no
+            assert all(x.last_command_sequence != seq_no for x in s[k:off])
+            checked += 1
+        else:
+            off = next(i for i in range(k, len(s)) if s[i].last_command_sequence == seq_no)
+            assert off - k <= 3                        # link latency of a tick or two
+            idle += 1
+        on = next(i for i in range(off, len(s)) if s[i].q == 1)
+        assert s[on].eta == pad and s[on].last_command_sequence == seq_no
+    assert checked > 300 and idle >= 1
+
+
+def test_one_percent_byte_corruption(tmp_path):
+    vt, core, seq = start(tmp_path, LinkFaults(corrupt=0.01, seed=3))
+    delivered = []
+    core.on_sample = lambda s: (delivered.append(s.sequence), seq.on_sample(s))
+    try:
+        run_sim_seconds(vt, core, seq, 60.0)
+    finally:
+        core.shutdown()
+        rep = vt.stop()
+    # judge the frames the host could read: up to the last telemetry it received
+    last = max(delivered)
+    upto = next(i for i, f in enumerate(rep.sent)
+                if f.type == P.TELEMETRY and f.message.sample_seq == last) + 1
+    sent = rep.sent[:upto]
+    tel = [f for f in sent if f.type == P.TELEMETRY]
+    intact = {f.message.sample_seq for f in tel if f.intact}
+    damaged = [f for f in sent if not f.intact]
+    st = core.decoder.stats
+    assert len(damaged) > 1000                        # ~35 % of 42-byte frames
+    assert set(delivered) >= intact                   # every intact frame arrived
+    assert set(delivered) <= {f.message.sample_seq for f in tel}
+    lost = len(sent) - st.frames
+    assert lost >= len(damaged) - 5                   # the damaged ones did not arrive ...
+    assert st.dropped > 0 and st.sequence_gaps == lost  # ... and every lost frame is counted
+    # delivered values are the values sent (no corrupted frame slipped through the CRC)
+    by_seq = {f.message.sample_seq: f.message for f in tel}
+    assert all(abs(by_seq[s_.sequence].device_time_us - s_.device_time_us) == 0
+               for s_ in seq.samples)
+
+
+def test_reconnects_within_a_second_of_the_device_returning(tmp_path):
+    vt, core, seq = start(tmp_path)
+    try:
+        assert wait(lambda: len(seq.samples) > 300, 5)
+        vt.unplug()
+        assert wait(lambda: not core.connected, 2.0)
+        time.sleep(0.7)
+        vt.plug()
+        t_back = time.monotonic()
+        assert wait(lambda: core.connected and core.decoder.stats.frames > 10, 2.0)
+        assert time.monotonic() - t_back < 1.0
+        assert core.stats.connects == 2 and core.stats.disconnects >= 1
+        # the device rebooted with HV off; the driver re-enabled it as configured
+        assert wait(lambda: seq.samples[-1].hv_monitor > 0, 1.0)
+    finally:
+        core.shutdown()
+        vt.stop()
+
+
+def test_watchdog_switches_hv_off_within_100_ms_of_host_silence(tmp_path):
+    vt, core, seq = start(tmp_path, w0=3.0, scale=1.0)
+    try:
+        run_sim_seconds(vt, core, seq, 1.0)
+        assert vt.status()["hv_enabled"]
+        core._running = False                      # the host hangs: no frame from now on
+        core._thread.join(1.0)
+        assert wait(lambda: not vt.status()["hv_enabled"], 2.0)
+    finally:
+        rep = vt.stop()
+        core._close()
+    last_host = rep.received[-1].t
+    assert 0.0 < rep.hv_off_t - last_host <= 0.100 + 1 / 300
+    assert rep.faults & P.F_WATCHDOG
+
+
+def test_sigterm_leaves_hv_off_as_the_last_frame(tmp_path):
+    link = tmp_path / "teensy"
+    vt = DeviceProcess(link, w0=1.0)
+    proc = subprocess.Popen([sys.executable, "-m", "hasel_wheel_driver.link_cli", "--port", str(link),
+                             "--enable-hv"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert wait(lambda: vt.status()["hv_enabled"], 10.0), "driver never enabled HV"
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=5)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        time.sleep(0.05)
+        rep = vt.stop()
+    assert proc.returncode == 0, out
+    frames = [h.frame.message for h in rep.received]
+    assert frames[-1] == P.Hv(0) and frames[-2] == P.Estop()
+    assert not rep.hv_enabled and rep.estop
+    assert "HV off confirmed" in out
