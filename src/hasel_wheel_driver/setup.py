@@ -1,4 +1,6 @@
 """Serial link to the wheel's Teensy, topic table, message definitions and bag I/O."""
+from glob import glob
+
 from setuptools import find_packages, setup
 
 package_name = "hasel_wheel_driver"
@@ -11,6 +13,8 @@ setup(
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*.yaml")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     install_requires=["setuptools"],
     zip_safe=False,
@@ -20,5 +24,6 @@ setup(
     license="Apache-2.0",
     entry_points={"console_scripts": [
         "hasel_wheel_link = hasel_wheel_driver.link_cli:main",
+        "driver_node = hasel_wheel_driver.driver_node:main",
     ]},
 )

@@ -108,6 +108,60 @@ def cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_link_run(args: argparse.Namespace) -> int:
+    """Run the host stack over a real pty against the virtual Teensy (no ROS), record a bag."""
+    import tempfile
+
+    from hasel_wheel_driver.link import DriverCore, LinkConfig
+    from hasel_wheel_driver import protocol as P
+    from hasel_wheel_sim.virtual_teensy import DeviceProcess, LinkFaults
+
+    from .sequencer import Sequencer
+
+    out = Path(args.out)
+    bag_dir = out / "bag"
+    if bag_dir.exists():
+        if not (bag_dir / "metadata.yaml").exists():
+            print(f"error: {bag_dir} exists but is not a bag written by this tool", file=sys.stderr)
+            return 2
+        shutil.rmtree(bag_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    link = Path(tempfile.mkdtemp(prefix="hasel-link-")) / "usb-Teensyduino_HASEL_wheel-if00"
+    plant_cfg = dataclasses.replace(load_plant_config(args.plant), switching="tick")
+    dev = DeviceProcess(link, plant_cfg, load_wheel_params(args.wheel_params), w0=args.initial_speed,
+                        time_scale=args.time_scale, faults=LinkFaults(corrupt=args.corrupt, seed=1))
+    rec = Recorder(bag_dir, custom_data={"tool": "hasel_wheel link-run", "git_revision": git_revision(),
+                                         "plant.yaml": Path(args.plant).read_text()})
+    seq = Sequencer(math.radians(args.phi_a_deg), math.radians(args.phi_d_deg))
+    core = None
+
+    def on_sample(s):
+        rec.telemetry("/wheel0", s)
+        cmd = seq.step(s)
+        if cmd is not None and core.send_command(cmd) is None:
+            rec.command("/wheel0", cmd, s.t)
+
+    cfg = P.Config(watchdog_ms=int(min(1000, 100 * max(1.0, args.time_scale))))
+    core = DriverCore(LinkConfig(str(link), enable_hv_on_connect=True, device_config=cfg),
+                      on_sample=on_sample).start()
+    try:
+        t_end = time.monotonic() + args.seconds / args.time_scale
+        while time.monotonic() < t_end:
+            time.sleep(0.05)
+    finally:
+        acked = core.shutdown()
+        rep = dev.stop()
+        rec.close()
+    d = core.decoder.stats
+    print(f"link-run: {args.seconds:.0f} s simulated over a pty at x{args.time_scale:g}; "
+          f"final speed {rep.speed:.2f} rad/s")
+    print(f"  frames decoded {d.frames}, CRC errors {d.crc_errors}, framing errors "
+          f"{d.framing_errors + d.oversize + d.length_errors}, sequence gaps {d.sequence_gaps}")
+    print(f"  commands sent {core.stats.commands_sent}, device rejects {core.stats.rejects}, "
+          f"shutdown HV off {'confirmed' if acked else 'NOT confirmed'}; bag: {bag_dir}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="hasel_wheel", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -118,6 +172,17 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant.yaml")))
     d.add_argument("--trials", default=str(packaged("hasel_wheel_mpc", "demo_open_loop.yaml")))
     d.set_defaults(func=cmd_demo)
+    r = sub.add_parser("link-run", help="host stack over a real pty against the virtual Teensy")
+    r.add_argument("--out", default="out/link_run")
+    r.add_argument("--seconds", type=float, default=60.0, help="simulated seconds")
+    r.add_argument("--time-scale", type=float, default=1.0, help="simulated seconds per wall second")
+    r.add_argument("--phi-a-deg", type=float, default=3.0)
+    r.add_argument("--phi-d-deg", type=float, default=22.0)
+    r.add_argument("--initial-speed", type=float, default=2.0, help="[rad/s]")
+    r.add_argument("--corrupt", type=float, default=0.0, help="byte corruption probability")
+    r.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
+    r.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant.yaml")))
+    r.set_defaults(func=cmd_link_run)
     return ap
 
 

@@ -147,6 +147,7 @@ class SentFrame:
     type: int
     intact: bool
     message: P.Message
+    t_wall: float = 0.0   # time.monotonic() right after the write (shared by all processes)
 
 
 @dataclass
@@ -308,7 +309,7 @@ class VirtualTeensy:
             self.write_drops += 1
             damaged, delim_ok = True, False
         self.sent.append(SentFrame(counter, P.TYPE_OF[type(msg)],
-                                   not damaged and self._prev_delim_intact, msg))
+                                   not damaged and self._prev_delim_intact, msg, time.monotonic()))
         self._prev_delim_intact = delim_ok
 
 

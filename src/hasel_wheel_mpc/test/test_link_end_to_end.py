@@ -13,6 +13,7 @@ import pytest
 from hasel_wheel_driver import protocol as P
 from hasel_wheel_driver.link import DriverCore, LinkConfig
 from hasel_wheel_driver.samples import Command
+from hasel_wheel_mpc.sequencer import Sequencer
 from hasel_wheel_sim.virtual_teensy import DeviceProcess, LinkFaults
 
 SCALE = 5.0               # simulated seconds per wall second
@@ -23,31 +24,30 @@ SCALED_CONFIG = P.Config(telemetry_rate_hz=300, watchdog_ms=500, max_on_ms=2000,
 D = math.radians
 
 
-class Sequencer:
-    """Host-side open loop: at every switch-on, send u for the next pad (one command per cycle)."""
+class Recorder:
+    """The package's Sequencer as the host controller, recording what it sent and when."""
 
     def __init__(self):
         self.core = None
         self.samples = []
         self.sent = []          # (sample index at sending, seq, target pad)
-        self.prev_q = 0
+        self.ctrl = Sequencer(D(3), D(22))
 
     def on_sample(self, s):
         self.samples.append(s)
-        if s.q == 1 and self.prev_q == 0:
-            self.send((s.eta_unwrapped + 1) % 16)
-        self.prev_q = s.q
+        cmd = self.ctrl.step(s)
+        if cmd is not None:
+            self.send(cmd)
 
-    def send(self, pad):
-        seq = len(self.sent) + 1
-        if self.core.send_command(Command(pad, D(3), D(22), seq)) is None:
-            self.sent.append((len(self.samples), seq, pad))
+    def send(self, cmd):
+        if self.core.send_command(cmd) is None:
+            self.sent.append((len(self.samples), cmd.sequence, cmd.n_a))
 
 
 def start(tmp_path, faults=None, w0=2.0, scale=SCALE):
     link = tmp_path / "usb-Teensyduino_HASEL_wheel-if00"
     vt = DeviceProcess(link, w0=w0, time_scale=scale, faults=faults)
-    seq = Sequencer()
+    seq = Recorder()
     core = DriverCore(LinkConfig(str(link), heartbeat_period=0.02, link_timeout=0.25,
                                  enable_hv_on_connect=True,
                                  device_config=SCALED_CONFIG if scale != 1.0 else None),
@@ -68,12 +68,9 @@ def wait(cond, timeout):
 
 def run_sim_seconds(vt, core, seq, seconds):
     assert wait(lambda: seq.samples and seq.samples[-1].hv_monitor > 0, 3.0), "HV never came on"
-    seq.send((seq.samples[-1].eta_unwrapped + 1) % 16)
     t_end = vt.status()["t"] + seconds
     while vt.status()["t"] < t_end:
         time.sleep(0.05)
-        if seq.samples and not any(s.q for s in seq.samples[-150:]) and len(seq.samples) > 150:
-            seq.send((seq.samples[-1].eta_unwrapped + 1) % 16)      # lost the beat: restart
 
 
 def test_no_faults_no_frame_lost_and_every_command_latched_at_switch_off(tmp_path):
@@ -92,21 +89,25 @@ def test_no_faults_no_frame_lost_and_every_command_latched_at_switch_off(tmp_pat
     assert [s.sequence for s in seq.samples] == list(range(1, len(seq.samples) + 1))
     assert len(seq.samples) >= 60 * 300 and 0 <= len(telemetry_sent) - len(seq.samples) <= 15
     assert speed > 2.5 and core.stats.rejects == 0              # driven, nothing refused
-    # protocol rule 3: a command sent during an activation is latched on the tick that
-    # actuator switches off; one sent while the wheel idles, on the next tick it arrives
+    # protocol rule 3, judged against each command's arrival on the device: latched on the
+    # first tick after arrival when the wheel idles, else on the first switch-off after it
+    arrived = {h.frame.message.command_seq: h.t for h in rep.received
+               if h.frame.type == P.COMMAND}
     s = seq.samples
+    t = [x.t for x in s]
     checked = idle = 0
-    for k, seq_no, pad in seq.sent[:-1]:
-        if s[k - 1].q == 1:
-            off = next(i for i in range(k, len(s)) if s[i].q == 0)
-            assert s[off].last_command_sequence == seq_no
-            assert all(x.last_command_sequence != seq_no for x in s[k:off])
-            checked += 1
-        else:
-            off = next(i for i in range(k, len(s)) if s[i].last_command_sequence == seq_no)
-            assert off - k <= 3                        # link latency of a tick or two
+    for _k, seq_no, pad in seq.sent[:-2]:
+        t_arr = arrived[seq_no]
+        i = next(j for j in range(len(s)) if t[j] > t_arr + 1e-9)   # first tick after arrival
+        if s[i - 1].last_command_sequence == 0:                   # idle: nothing latched yet
+            off = i
             idle += 1
-        on = next(i for i in range(off, len(s)) if s[i].q == 1)
+        else:                                                     # a target is latched
+            off = next(j for j in range(i, len(s)) if s[j].q == 0 and s[j - 1].q == 1)
+            assert all(x.last_command_sequence != seq_no for x in s[i:off])
+            checked += 1
+        assert s[off].last_command_sequence == seq_no
+        on = next(j for j in range(off, len(s)) if s[j].q == 1)
         assert s[on].eta == pad and s[on].last_command_sequence == seq_no
     assert checked > 300 and idle >= 1
 

@@ -1,0 +1,117 @@
+"""driver_node: the wheel's Teensy (USB serial, protocol v1) as ROS 2 topics.
+
+Publishes ``telemetry``, ``joint_states`` and ``/diagnostics``; forwards ``command`` after
+validating it.  Serial I/O runs in the driver core's own thread, so the executor never waits
+on the port.  HV: off until ``hv_enabled`` is set true; off again on shutdown (SIGINT/SIGTERM),
+on a stale or lost link, and whenever the device's watchdog trips.
+"""
+from __future__ import annotations
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from hasel_wheel_msgs.msg import ActuationCommand, WheelTelemetry
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from hasel_wheel_driver import samples, topics
+from hasel_wheel_driver.link import DriverCore, LinkConfig
+from hasel_wheel_driver.nodes.ros_common import (diagnostic_array, fill, float_param, qos_profile,
+                                                  text_param)
+
+
+class DriverNode(Node):
+
+    def __init__(self) -> None:
+        super().__init__("hasel_wheel_driver")
+        port = self.declare_parameter(
+            "port", "/dev/ttyACM0",
+            text_param("serial device; prefer the stable /dev/serial/by-id/usb-... name")).value
+        hb = self.declare_parameter(
+            "heartbeat_period", 0.02,
+            float_param("heartbeat period [s] (device watchdog: 100 ms)", 0.005, 0.05, True)).value
+        timeout = self.declare_parameter(
+            "link_timeout", 0.25,
+            float_param("no telemetry this long = stale link: ESTOP + HV off [s]", 0.05, 5.0, True)).value
+        self.declare_parameter("hv_enabled", False,
+                               text_param("request HV on (true) or off (false)", read_only=False))
+        self.declare_parameter("frame_id", "wheel", text_param("frame_id of telemetry headers"))
+        period = self.declare_parameter(
+            "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0, True)).value
+        self.frame_id = self.get_parameter("frame_id").value
+        self.commands_refused = 0
+
+        self.pub_tlm = self.create_publisher(WheelTelemetry, topics.TELEMETRY.name,
+                                             qos_profile(topics.TELEMETRY.qos))
+        self.pub_js = self.create_publisher(JointState, topics.JOINT_STATES.name,
+                                            qos_profile(topics.JOINT_STATES.qos))
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS.name,
+                                              qos_profile(topics.DIAGNOSTICS.qos))
+        self.create_subscription(ActuationCommand, topics.COMMAND.name, self._on_command,
+                                 qos_profile(topics.COMMAND.qos))
+        self.core = DriverCore(LinkConfig(port, heartbeat_period=hb, link_timeout=timeout),
+                               on_sample=self._on_sample, on_event=self._on_event)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.create_timer(period, self._on_diagnostics)
+        self.core.start()
+        self.get_logger().info(f"serial link on {port}; HV stays off until hv_enabled is true")
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        for p in params:
+            if p.name == "hv_enabled":
+                if not isinstance(p.value, bool):
+                    return SetParametersResult(successful=False, reason="hv_enabled must be true or false")
+                if p.value:
+                    self.core.clear_estop()
+                self.core.set_hv(p.value)
+        return SetParametersResult(successful=True)
+
+    def _on_sample(self, s: samples.TelemetrySample) -> None:
+        # runs in the link thread; stamp with the ROS time of arrival
+        host = s._replace(t=self.get_clock().now().nanoseconds * 1e-9)
+        self.pub_tlm.publish(fill(WheelTelemetry(), samples.telemetry_msg(host, self.frame_id)))
+        self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
+
+    def _on_event(self, event: str) -> None:
+        self.get_logger().warn(f"link: {event}") if "lost" in event or "stale" in event \
+            else self.get_logger().info(f"link: {event}")
+
+    def _on_command(self, msg: ActuationCommand) -> None:
+        why = self.core.send_command(samples.Command(int(msg.n_a), float(msg.phi_a),
+                                                     float(msg.phi_d), int(msg.sequence)))
+        if why:
+            self.commands_refused += 1
+            self.get_logger().warn(f"command {msg.sequence} not sent, HV stays off for it: {why}")
+
+    def _on_diagnostics(self) -> None:
+        d = self.core.diagnostics()
+        d["commands_refused"] = str(self.commands_refused)
+        ok = self.core.connected and not self.core.stale
+        level = DiagnosticStatus.OK[0] if ok else DiagnosticStatus.ERROR[0]
+        self.pub_diag.publish(diagnostic_array(
+            self.get_clock().now().to_msg(), f"{self.get_fully_qualified_name()}: serial link",
+            self.core.config.port, level, "link up" if ok else "link down or stale: HV off", d))
+
+    def destroy_node(self) -> None:
+        confirmed = self.core.shutdown()          # ESTOP, then HV(0) as the last frame
+        self.get_logger().info(f"HV off {'confirmed' if confirmed else 'sent, NOT confirmed'}")
+        super().destroy_node()
+
+
+def main(args=None):
+    rclpy.init(args=args)
+
+    node = DriverNode()
+
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

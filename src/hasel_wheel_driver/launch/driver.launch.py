@@ -1,0 +1,22 @@
+"""Launch the real wheel's driver: ros2 launch hasel_wheel_driver driver.launch.py port:=/dev/serial/by-id/..."""
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.substitutions import FindPackageShare
+
+
+def generate_launch_description():
+    share = FindPackageShare("hasel_wheel_driver")
+    return LaunchDescription([
+        DeclareLaunchArgument("namespace", default_value="wheel0",
+                              description="namespace of the wheel's topics"),
+        DeclareLaunchArgument("port", default_value="/dev/ttyACM0",
+                              description="serial device (a /dev/serial/by-id/... name is stable)"),
+        DeclareLaunchArgument("params_file",
+                              default_value=PathJoinSubstitution([share, "config", "driver_node.yaml"]),
+                              description="ROS parameter file of driver_node"),
+        Node(package="hasel_wheel_driver", executable="driver_node", name="driver",
+             namespace=LaunchConfiguration("namespace"), output="screen",
+             parameters=[LaunchConfiguration("params_file"), {"port": LaunchConfiguration("port")}]),
+    ])
