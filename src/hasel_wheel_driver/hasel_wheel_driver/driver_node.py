@@ -8,7 +8,7 @@ on a stale or lost link, and whenever the device's watchdog trips.
 from __future__ import annotations
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, WheelTelemetry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException
@@ -17,8 +17,8 @@ from sensor_msgs.msg import JointState
 
 from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.link import DriverCore, LinkConfig
-from hasel_wheel_driver.nodes.ros_common import (diagnostic_array, fill, float_param, qos_profile,
-                                                  text_param)
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, diagnostic_array, fill,
+                                                  float_param, qos_profile, text_param)
 
 
 class DriverNode(Node):
@@ -42,12 +42,8 @@ class DriverNode(Node):
         self.frame_id = self.get_parameter("frame_id").value
         self.commands_refused = 0
 
-        self.pub_tlm = self.create_publisher(WheelTelemetry, topics.TELEMETRY.name,
-                                             qos_profile(topics.TELEMETRY.qos))
-        self.pub_js = self.create_publisher(JointState, topics.JOINT_STATES.name,
-                                            qos_profile(topics.JOINT_STATES.qos))
-        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS.name,
-                                              qos_profile(topics.DIAGNOSTICS.qos))
+        pubs = create_publishers(self, (topics.TELEMETRY, topics.JOINT_STATES, topics.DIAGNOSTICS))
+        self.pub_tlm, self.pub_js, self.pub_diag = pubs.values()
         self.create_subscription(ActuationCommand, topics.COMMAND.name, self._on_command,
                                  qos_profile(topics.COMMAND.qos))
         self.core = DriverCore(LinkConfig(port, heartbeat_period=hb, link_timeout=timeout),
@@ -69,6 +65,8 @@ class DriverNode(Node):
 
     def _on_sample(self, s: samples.TelemetrySample) -> None:
         # runs in the link thread; stamp with the ROS time of arrival
+        if not self.context.ok():      # shutting down (SIGINT/SIGTERM): nothing to publish to
+            return
         host = s._replace(t=self.get_clock().now().nanoseconds * 1e-9)
         self.pub_tlm.publish(fill(WheelTelemetry(), samples.telemetry_msg(host, self.frame_id)))
         self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))

@@ -46,6 +46,7 @@ class LinkStats:
     commands_rejected_locally: int = 0
     rejects: int = 0
     write_errors: int = 0
+    callback_errors: int = 0
     samples: int = 0
     latencies: list[float] = field(default_factory=list)  # frame bytes read -> handed over [s]
 
@@ -159,6 +160,7 @@ class DriverCore:
                 "framing_errors": str(d.framing_errors + d.oversize + d.length_errors),
                 "sequence_gaps": str(d.sequence_gaps), "reconnects": str(self.stats.connects),
                 "device_rejects": str(self.stats.rejects),
+                "callback_errors": str(self.stats.callback_errors),
                 "latency_p99_ms": f"{p99 * 1e3:.3f}"}
 
     # -- internals ---------------------------------------------------------------------------
@@ -271,7 +273,12 @@ class DriverCore:
                     eta_unwrapped=m.eta_unwrapped, active_mask=m.active_mask,
                     hv_monitor=m.hv_monitor, current_monitor=m.current_monitor,
                     last_command_sequence=m.last_command_seq, fault_flags=m.fault_flags)
-                self.on_sample(sample)
+                try:  # a failing consumer must not stop the link (heartbeats, acks)
+                    self.on_sample(sample)
+                except Exception as exc:  # noqa: BLE001 - reported, counted, link continues
+                    self.stats.callback_errors += 1
+                    if self.stats.callback_errors == 1:
+                        self.on_event(f"sample callback failed (reported once): {exc!r}")
                 self.stats.samples += 1
                 lat = self.stats.latencies
                 lat.append(self.clock() - t_rx)

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, HybridStateEstimate, WheelTelemetry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException
@@ -18,8 +18,8 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (diagnostic_array, fill, float_param, qos_profile,
-                                                  text_param)
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, diagnostic_array, fill,
+                                                  float_param, qos_profile, text_param)
 from hasel_wheel_sim.params import ParameterError, load_wheel_params
 from hasel_wheel_sim.plant import load_plant_config
 from hasel_wheel_sim.sim_runtime import SimRuntime
@@ -48,14 +48,9 @@ class SimNode(Node):
         self.core = SimRuntime(load_wheel_params(wheel_file), load_plant_config(plant_file), w0, scale)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self.pub_tlm = self.create_publisher(WheelTelemetry, topics.TELEMETRY.name,
-                                             qos_profile(topics.TELEMETRY.qos))
-        self.pub_js = self.create_publisher(JointState, topics.JOINT_STATES.name,
-                                            qos_profile(topics.JOINT_STATES.qos))
-        self.pub_truth = self.create_publisher(HybridStateEstimate, topics.TRUE_STATE.name,
-                                               qos_profile(topics.TRUE_STATE.qos))
-        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS.name,
-                                              qos_profile(topics.DIAGNOSTICS.qos))
+        pubs = create_publishers(self, (topics.TELEMETRY, topics.JOINT_STATES, topics.TRUE_STATE,
+                                        topics.DIAGNOSTICS))
+        self.pub_tlm, self.pub_js, self.pub_truth, self.pub_diag = pubs.values()
         self.create_subscription(ActuationCommand, topics.COMMAND.name, self._on_command,
                                  qos_profile(topics.COMMAND.qos))
         self.t0_ns = self.get_clock().now().nanoseconds

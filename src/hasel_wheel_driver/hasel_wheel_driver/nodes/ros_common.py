@@ -4,13 +4,14 @@ This module imports rclpy and message packages; only node modules import it.
 """
 from __future__ import annotations
 
+import importlib
 from typing import Any, Iterable, Mapping
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from hasel_wheel_driver.topics import QosSpec
+from hasel_wheel_driver.topics import QosSpec, Topic
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE,
@@ -23,6 +24,18 @@ def qos_profile(spec: QosSpec) -> QoSProfile:
     return QoSProfile(history=_HISTORY[spec.history], depth=spec.depth,
                       reliability=_RELIABILITY[spec.reliability],
                       durability=_DURABILITY[spec.durability])
+
+
+def message_class(datatype: str) -> type:
+    """The rclpy message class of 'pkg/msg/Name'."""
+    pkg, _, name = datatype.split("/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+def create_publishers(node: Any, table: Iterable[Topic]) -> dict[str, Any]:
+    """One publisher per topic-table entry (name, type, QoS), keyed by the topic's name."""
+    return {t.name: node.create_publisher(message_class(t.type), t.name, qos_profile(t.qos))
+            for t in table}
 
 
 def fill(msg: Any, data: Mapping[str, Any]) -> Any:

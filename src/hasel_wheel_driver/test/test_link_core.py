@@ -1,0 +1,45 @@
+"""The driver core refuses bad commands locally and survives a failing consumer."""
+import math
+import os
+import tty
+
+import pytest
+
+from hasel_wheel_driver import protocol as P
+from hasel_wheel_driver.link import DriverCore, LinkConfig
+from hasel_wheel_driver.samples import Command
+
+
+@pytest.mark.parametrize("cmd, match", [
+    (Command(16, 0.05, 0.3), "n_a = 16 is outside 0..15"),
+    (Command(3, math.inf, 0.3), "must be finite and within"),
+    (Command(3, 0.3, 0.05), "need phi_a < phi_d"),
+])
+def test_bad_commands_are_refused_before_the_wire(cmd, match):
+    core = DriverCore(LinkConfig("/nonexistent"))
+    assert match in core.send_command(cmd)
+    assert core.stats.commands_sent == 0 and core.stats.commands_rejected_locally == 1
+
+
+def test_no_link_no_command():
+    core = DriverCore(LinkConfig("/nonexistent"))
+    assert core.send_command(Command(3, 0.05, 0.3)) == "no link to the wheel"
+
+
+def test_a_raising_consumer_does_not_stop_the_link():
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    events = []
+
+    def bad(_sample):
+        raise RuntimeError("publisher's context is invalid")
+    core = DriverCore(LinkConfig(os.ttyname(slave)), on_sample=bad, on_event=events.append)
+    core._ser = None
+    core._open()
+    tel = P.Telemetry(1, 1, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0, 0)
+    core._handle(P.encode(tel, 1) + P.encode(tel._replace(sample_seq=2), 2), 0.0)
+    assert core.stats.samples == 2 and core.stats.callback_errors == 2
+    assert sum("callback failed" in e for e in events) == 1
+    core._close()
+    os.close(master)
+    os.close(slave)
