@@ -7,6 +7,8 @@ on a stale or lost link, and whenever the device's watchdog trips.
 """
 from __future__ import annotations
 
+import sys
+
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, WheelTelemetry
@@ -93,7 +95,11 @@ class DriverNode(Node):
 
     def destroy_node(self) -> None:
         confirmed = self.core.shutdown()          # ESTOP, then HV(0) as the last frame
-        self.get_logger().info(f"HV off {'confirmed' if confirmed else 'sent, NOT confirmed'}")
+        note = f"HV off {'confirmed' if confirmed else 'sent, NOT confirmed'}"
+        if self.context.ok():
+            self.get_logger().info(note)
+        else:                                     # after SIGINT/SIGTERM rosout is gone
+            print(f"[{self.get_fully_qualified_name()}] {note}", file=sys.stderr, flush=True)
         super().destroy_node()
 
 
