@@ -9,6 +9,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from hasel_wheel_driver import interfaces
 
+PRIMITIVE_NUMBERS = {"bool", "byte", "float32", "float64", "int8", "uint8", "int16", "uint16",
+                     "int32", "uint32", "int64", "uint64"}
 MSG_DIR = Path(__file__).resolve().parents[2] / "hasel_wheel_msgs" / "msg"
 OWN = sorted(p.stem for p in MSG_DIR.glob("*.msg"))
 STD = ["std_msgs/msg/Header", "std_msgs/msg/Float64", "sensor_msgs/msg/JointState",
@@ -43,8 +45,8 @@ def test_every_field_states_its_unit(name):
         if code.strip() and "=" not in code:
             assert comment.strip(), f"{name}: field without a comment: {line!r}"
             ftype = code.split()[0]
-            if ftype.startswith("float"):
-                assert re.search(r"\[[^\]]+\]", comment), f"{name}: float field without [unit]: {line!r}"
+            if ftype.split("[")[0] in PRIMITIVE_NUMBERS:
+                assert re.search(r"\[[^\]]+\]", comment), f"{name}: numeric field without [unit]: {line!r}"
 
 
 @pytest.mark.parametrize("dt", STD)

@@ -16,12 +16,16 @@ from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
+
 from hasel_wheel_sim.params import ParameterError, load_wheel_params, load_yaml_file
 from hasel_wheel_sim.plant import PlantConfig, load_plant_config
+from hasel_wheel_sim.trials_support import braking_fall_time, open_loop_speed
+from hasel_wheel_sim.wheel import TICK
 
 from . import paper
 from .recorder import Recorder, git_revision
-from .trials import TrialResult, run_trial, trials_from_mapping
+from .trials import TrialResult, run_trial, steady_speed, trials_from_mapping
 
 #: Cross-check numbers of model-notes.md (independent implementation): phi_a [deg] ->
 #: (exact w_ss [rad/s], exact t90 [s], tick w_ss [rad/s]).
@@ -100,9 +104,18 @@ def cmd_demo(args: argparse.Namespace) -> int:
     sim = sum(r.spec.duration for r in exact + tick)
     print(demo_table(exact, tick))
     print()
-    print(f"Ticks: switching on the first 300 Hz tick after the angle, next actuator counted from")
-    print(f"the sector measured at switch-off (eq. (40)); this is what moves phi_a = 1 deg from 4.7")
-    print(f"to 3.8 rad/s (see README).")
+    first = trials[0]
+    v_alt = open_loop_speed(params, plant_cfg.effects.extensions(), first.phi_a, first.duration,
+                            first.phi_d, first.initial_speed, mode="tick", rule="after_active")
+    t_brake = braking_fall_time(params)
+    t_coast = braking_fall_time(params, brake=False)
+    print(f"Priming: {first.priming} activations (model-notes set-up); the paper's trials used 6.")
+    print("Ticks: switching on the first 300 Hz tick after the angle, next actuator counted from")
+    print("the sector measured at switch-off (eq. (40)).  Counted from the actuator of interest")
+    print(f"instead, phi_a = {math.degrees(first.phi_a):.0f} deg on ticks gives "
+          f"{steady_speed(np.arange(1, v_alt.size + 1) * TICK, v_alt):.2f} rad/s (README).")
+    print(f"Braking 2.6 -> 2.0 rad/s (n_a = eta + 2, -22/-6 deg, brake_gain {params.brake_gain:g}): "
+          f"{t_brake:.2f} s; friction alone {t_coast:.2f} s; paper Fig. 11(c) ~1.2 s.")
     print(f"Bag: {bag_dir} ({rec.bag.metadata()['rosbag2_bagfile_information']['message_count']}"
           f" messages). {sim:.0f} s simulated in {wall:.1f} s wall.")
     return 0

@@ -18,14 +18,14 @@ import math
 import numpy as np
 
 from . import layout as L
-from .jit import jit, jit_parallel, prange
+from .jit import jit, jit_inline, jit_parallel, prange
 from .model import N_ACTUATORS, SECTOR, acceleration, sector_of, unwrap_target
 
 #: Tolerance of event location on the wheel angle [rad].
 EVENT_TOL = 1e-12
 
 
-@jit
+@jit_inline
 def _gain(s: np.ndarray, pv: np.ndarray) -> float:
     """Force gain of the actuator of interest: fabrication spread x charge retention."""
     act = int(s[L.S_ETA]) % N_ACTUATORS
@@ -35,7 +35,7 @@ def _gain(s: np.ndarray, pv: np.ndarray) -> float:
     return g
 
 
-@jit
+@jit_inline
 def rk4(xi1: float, xi2: float, h: float, s: np.ndarray, gain: float,
         pv: np.ndarray) -> tuple[float, float]:
     """One classical RK4 step of length h [s] of (xi1, xi2) with q, eta, phi_a held (a flow).
@@ -110,7 +110,7 @@ def _locate(s: np.ndarray, gain: float, pv: np.ndarray, h_max: float, target: fl
     return hi
 
 
-@jit
+@jit_inline
 def _flow(s: np.ndarray, gain: float, pv: np.ndarray, dt: float, x: float, v: float) -> None:
     """Commit a flow of duration dt that ended at (x, v): time, on-time, retention, counters."""
     s[L.S_T] += dt

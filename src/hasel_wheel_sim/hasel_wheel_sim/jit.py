@@ -62,6 +62,17 @@ def jit(fn: Callable[..., Any]) -> Callable[..., Any]:
     return fn
 
 
+def jit_inline(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Like :func:`jit`, and inlined into compiled callers (``inline='always'``).
+
+    For the small functions of the RK4 inner loop: a compiled call that passes arrays pays
+    reference counting on every call, which cost more than the arithmetic (measured).
+    """
+    if HAVE_NUMBA:
+        return numba.njit(cache=bool(numba.config.CACHE_DIR), nogil=True, inline="always")(fn)
+    return fn
+
+
 def jit_parallel(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Like :func:`jit`, with ``parallel=True``: ``prange`` loops run on all cores."""
     if HAVE_NUMBA:

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import layout as L
-from .jit import jit
+from .jit import jit, jit_inline
 from .params import WheelParams
 
 #: Angle between adjacent actuator pads [rad].
@@ -109,7 +109,7 @@ def force_band(p: WheelParams) -> tuple[float, float]:
     return math.exp(c - half), math.exp(c + half)
 
 
-@jit
+@jit_inline
 def force_law(xi_c: float, xi2: float, phi_a: float, pv: np.ndarray) -> float:
     """Actuation force F_a [N] of (43) for an actuator that is on (q = 1).
 
@@ -134,7 +134,7 @@ def force_law(xi_c: float, xi2: float, phi_a: float, pv: np.ndarray) -> float:
     return k * bump * pv[L.P_SIGMA6] * (xi_c - phi_a) / (pv[L.P_SIGMA2] * abs(xi2) + pv[L.P_SIGMA3])
 
 
-@jit
+@jit_inline
 def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
     """Axle torque [N*m] of the extensions that do not involve the actuators (0 when off)."""
     tau = 0.0
@@ -147,7 +147,7 @@ def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
     return tau
 
 
-@jit
+@jit_inline
 def acceleration(xi1: float, xi2: float, q: float, eta: float, phi_a: float, gain: float,
                  on_time: float, pv: np.ndarray, fric_dir: float = 0.0) -> float:
     """Flow map of xi2: xi2' [rad/s^2] from (38)/(45) plus the enabled extensions.

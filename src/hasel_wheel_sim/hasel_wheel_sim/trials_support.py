@@ -27,3 +27,26 @@ def open_loop_speed(params: WheelParams, ext: Extensions, phi_a: float, seconds:
         v[k] = s[L.S_XI2]
         eta[k] = int(s[L.S_ETA])
     return (v, eta) if return_state else v
+
+
+def braking_fall_time(params: WheelParams, brake: bool = True, w0: float = 2.6, w1: float = 2.0,
+                      mode: SwitchMode = "exact", limit: float = 10.0) -> float:
+    """Time [s] for the speed to fall from w0 to w1 [rad/s] (paper Fig. 11(c): 2.6 -> 2.0).
+
+    With ``brake`` a braking input (III-D) is sent at every switch-on, decided from the contact
+    sector as the controller does; without it the wheel coasts on friction alone.
+    """
+    from .model import braking_input
+
+    w = HybridWheel(params, mode=mode, xi2=w0)
+    if brake:
+        w.command(*braking_input(w.s[L.S_XI1]))
+    t = 0.0
+    while w.s[L.S_XI2] > w1:
+        ev = w.advance()
+        t += TICK
+        if brake and any(e[2] == L.EV_ON for e in ev):
+            w.command(*braking_input(w.s[L.S_XI1]))
+        if t > limit:
+            raise RuntimeError(f"speed did not fall below {w1} rad/s within {limit} s")
+    return t

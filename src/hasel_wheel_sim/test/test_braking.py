@@ -4,25 +4,12 @@ import math
 
 import pytest
 
-from hasel_wheel_sim import layout as L
-from hasel_wheel_sim.model import braking_input
-from hasel_wheel_sim.wheel import TICK, HybridWheel
+from hasel_wheel_sim.trials_support import braking_fall_time
+from hasel_wheel_sim.wheel import TICK
 
 
-def fall_time(params, brake: bool, mode="exact"):
-    """Time [s] from 2.6 to 2.0 rad/s; with ``brake`` a braking input is sent at every
-    switch-on (decided from the contact sector, as the controller does)."""
-    w = HybridWheel(params, mode=mode, xi2=2.6)
-    if brake:
-        w.command(*braking_input(w.s[L.S_XI1]))
-    t = 0.0
-    while w.s[L.S_XI2] > 2.0:
-        ev = w.advance()
-        t += TICK
-        if brake and any(e[2] == L.EV_ON for e in ev):
-            w.command(*braking_input(w.s[L.S_XI1]))
-        assert t < 5.0
-    return t
+def fall_time(params, brake, mode="exact"):
+    return braking_fall_time(params, brake=brake, mode=mode)
 
 
 def test_friction_alone_matches_the_closed_form(params):

@@ -169,7 +169,6 @@ def test_serial_latency_delays_commands_and_samples():
     out = [p.step(Command(1, D(3), D(22), 5) if k == 0 else None) for k in range(12)]
     assert out[0] is None and out[1] is None and out[2] is None   # 10 ms = 3 ticks in flight
     assert out[3].sequence == 1
-    arm = [k for k in range(12) if False]
     p2 = _plant(fx)
     armed_at = None
     for k in range(20):
