@@ -47,6 +47,7 @@ class LinkStats:
     rejects: int = 0
     write_errors: int = 0
     callback_errors: int = 0
+    watchdog_trips: int = 0       # rising edges of the device's watchdog fault bit
     samples: int = 0
     latencies: list[float] = field(default_factory=list)  # frame bytes read -> handed over [s]
 
@@ -81,6 +82,9 @@ class DriverCore:
         self._last_rx = 0.0
         self._next_hb = 0.0
         self._cmd_seq = 0
+        self._rate_t0 = clock()
+        self._rate_n0 = 0
+        self.frame_rate = 0.0       # telemetry frames per second over the last >= 1 s
 
     # -- public API ------------------------------------------------------------------------
     def start(self) -> "DriverCore":
@@ -103,20 +107,21 @@ class DriverCore:
         if not self.connected:
             return "no link to the wheel"
         seq = cmd.sequence or self._next_seq()
-        self._write(P.Command(seq, cmd.n_a, cmd.phi_a, cmd.phi_d))
+        if self._write(P.Command(seq, cmd.n_a, cmd.phi_a, cmd.phi_d)) is None:
+            return "shutting down: no command after ESTOP / HV off"
         self.stats.commands_sent += 1
         return None
 
-    def set_hv(self, enable: bool) -> int:
-        """Ask for HV on or off; returns the frame counter (see :meth:`wait_ack`)."""
+    def set_hv(self, enable: bool) -> int | None:
+        """Ask for HV on or off; returns the frame counter (see :meth:`wait_ack`), None if closing."""
         self.hv_requested = enable
         return self._write(P.Hv(1 if enable else 0))
 
-    def estop(self) -> int:
+    def estop(self) -> int | None:
         self.hv_requested = False
         return self._write(P.Estop())
 
-    def clear_estop(self) -> int:
+    def clear_estop(self) -> int | None:
         return self._write(P.ClearEstop())
 
     def wait_ack(self, counter: int, timeout: float | None = None) -> P.Message | None:
@@ -135,11 +140,13 @@ class DriverCore:
 
         Returns True when the device acknowledged both.
         """
-        self._closing = True
+        with self._write_lock:
+            self._closing = True
+        self.hv_requested = False
         ok = False
         if self.connected:
-            c1 = self.estop()
-            c2 = self._write(P.Hv(0))
+            c1 = self._write(P.Estop(), closing=True)
+            c2 = self._write(P.Hv(0), closing=True)
             ok = isinstance(self.wait_ack(c1), P.Ack) & isinstance(self.wait_ack(c2), P.Ack)
         self._running = False
         if self._thread and self._thread is not threading.current_thread():
@@ -156,10 +163,12 @@ class DriverCore:
                 "hv_requested": str(self.hv_requested),
                 "hv_on": str(bool(t and t.hv_monitor > 0)),
                 "fault_flags": str(t.fault_flags if t else 0),
-                "frames": str(d.frames), "crc_errors": str(d.crc_errors),
+                "frames": str(d.frames), "frame_rate_hz": f"{self.frame_rate:.1f}",
+                "crc_errors": str(d.crc_errors),
                 "framing_errors": str(d.framing_errors + d.oversize + d.length_errors),
                 "sequence_gaps": str(d.sequence_gaps), "reconnects": str(self.stats.connects),
                 "device_rejects": str(self.stats.rejects),
+                "watchdog_trips": str(self.stats.watchdog_trips),
                 "callback_errors": str(self.stats.callback_errors),
                 "latency_p99_ms": f"{p99 * 1e3:.3f}"}
 
@@ -168,8 +177,15 @@ class DriverCore:
         self._cmd_seq += 1
         return self._cmd_seq
 
-    def _write(self, msg: P.Message) -> int:
+    def _write(self, msg: P.Message, closing: bool = False) -> int | None:
+        """Send one frame; returns its counter, or None when refused because we are closing.
+
+        Once :meth:`shutdown` has begun, only its own ESTOP and HV(0) go out (``closing``),
+        so HV(0) stays the last frame on the wire whatever other threads try to send.
+        """
         with self._write_lock:
+            if self._closing and not closing:
+                return None
             self._counter = (self._counter + 1) & 0xFFFF
             counter = self._counter
             ser = self._ser
@@ -265,7 +281,14 @@ class DriverCore:
                     if self.config.enable_hv_on_connect and not self._closing:
                         self.clear_estop()
                         self.set_hv(True)
+                prev = self.last_telemetry
+                if m.fault_flags & P.F_WATCHDOG and not (prev and prev.fault_flags & P.F_WATCHDOG):
+                    self.stats.watchdog_trips += 1
+                    self.on_event("device watchdog tripped: HV was switched off")
                 self.last_telemetry = m
+                if t_rx - self._rate_t0 >= 1.0:
+                    self.frame_rate = (self.stats.samples - self._rate_n0) / (t_rx - self._rate_t0)
+                    self._rate_t0, self._rate_n0 = t_rx, self.stats.samples
                 sample = TelemetrySample(
                     t=m.device_time_us * 1e-6, device_time_us=m.device_time_us,
                     sequence=m.sample_seq, encoder_raw=m.encoder_raw,

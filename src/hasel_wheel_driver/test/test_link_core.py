@@ -43,3 +43,27 @@ def test_a_raising_consumer_does_not_stop_the_link():
     core._close()
     os.close(master)
     os.close(slave)
+
+
+def test_nothing_follows_hv_off_on_the_wire_during_shutdown():
+    # another thread (the controller in the reader thread) tries to command while shutdown
+    # waits for its ACKs: it is refused, and HV(0) stays the last frame
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    core = DriverCore(LinkConfig(os.ttyname(slave), ack_timeout=0.01))
+    core._open()
+    refused = []
+    real_wait = core.wait_ack
+
+    def wait_and_interfere(counter, timeout=None):
+        refused.append(core.send_command(Command(3, 0.05, 0.3, 99)))
+        return real_wait(counter, timeout)
+    core.wait_ack = wait_and_interfere
+    core.shutdown()
+    os.set_blocking(master, False)
+    frames = P.FrameDecoder().feed(os.read(master, 65536))
+    assert [f.message for f in frames][-2:] == [P.Estop(), P.Hv(0)]
+    assert not any(isinstance(f.message, P.Command) for f in frames)
+    assert refused and all(r.startswith("shutting down") for r in refused)
+    os.close(master)
+    os.close(slave)

@@ -78,6 +78,7 @@ def test_no_faults_no_frame_lost_and_every_command_latched_at_switch_off(tmp_pat
     try:
         run_sim_seconds(vt, core, seq, 60.0)
         speed = vt.status()["speed"]
+        rate = float(core.diagnostics()["frame_rate_hz"])
     finally:
         core.shutdown()
         rep = vt.stop()
@@ -89,6 +90,7 @@ def test_no_faults_no_frame_lost_and_every_command_latched_at_switch_off(tmp_pat
     assert [s.sequence for s in seq.samples] == list(range(1, len(seq.samples) + 1))
     assert len(seq.samples) >= 60 * 300 and 0 <= len(telemetry_sent) - len(seq.samples) <= 15
     assert speed > 2.5 and core.stats.rejects == 0              # driven, nothing refused
+    assert rate == pytest.approx(300 * SCALE, rel=0.1)          # diagnostics: frames per second
     # protocol rule 3, judged against each command's arrival on the device: latched on the
     # first tick after arrival when the wheel idles, else on the first switch-off after it
     arrived = {h.frame.message.command_seq: h.t for h in rep.received
@@ -197,3 +199,37 @@ def test_sigterm_leaves_hv_off_as_the_last_frame(tmp_path):
     assert frames[-1] == P.Hv(0) and frames[-2] == P.Estop()
     assert not rep.hv_enabled and rep.estop
     assert "HV off confirmed" in out
+
+
+def test_dropped_bytes_lose_only_the_hit_frames(tmp_path):
+    vt, core, seq = start(tmp_path, LinkFaults(drop=0.005, seed=5))
+    delivered = []
+    core.on_sample = lambda s: (delivered.append(s.sequence), seq.on_sample(s))
+    try:
+        run_sim_seconds(vt, core, seq, 20.0)
+    finally:
+        core.shutdown()
+        rep = vt.stop()
+    last = max(delivered)
+    tel = [f for f in rep.sent if f.type == P.TELEMETRY and f.message.sample_seq <= last]
+    intact = {f.message.sample_seq for f in tel if f.intact}
+    assert len(intact) < len(tel) - 100                 # bytes were really dropped
+    assert set(delivered) >= intact                     # every intact frame still arrived
+    assert core.decoder.stats.dropped > 0
+
+
+def test_a_stalled_device_is_stale_to_the_host_and_switches_hv_off_itself(tmp_path):
+    vt, core, seq = start(tmp_path, w0=3.0)
+    try:
+        run_sim_seconds(vt, core, seq, 2.0)
+        vt.stall(0.6)                                   # mute and deaf for 0.6 s of wall time
+        assert wait(lambda: core.stale, 1.0)            # host: no telemetry for 250 ms
+        assert wait(lambda: not core.stale, 2.0)        # telemetry resumed
+        assert wait(lambda: seq.samples[-1].hv_monitor > 0, 1.0)   # re-enabled as configured
+    finally:
+        core.shutdown()
+        rep = vt.stop()
+    assert core.stats.stale_events == 1 and core.stats.watchdog_trips == 1
+    # the device, hearing nothing during the stall, tripped its own watchdog: HV off
+    assert rep.faults & P.F_WATCHDOG or rep.hv_off_t is not None
+    assert core.diagnostics()["watchdog_trips"] == "1"
