@@ -1,0 +1,72 @@
+"""The observer on quantised data with a known true speed, against the finite difference's
+closed-form error, with glitches, lost samples and the realistic plant."""
+import math
+
+import numpy as np
+import pytest
+
+from hasel_wheel_mpc.observer import COUNT, Observer, ObserverConfig, finite_difference_speed
+from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
+from hasel_wheel_sim.plant import Plant, PlantConfig
+from hasel_wheel_sim.wheel import TICK
+
+D = math.radians
+ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.0, "unit": "rad"}}}
+
+
+def run(effects, seconds=40.0, seed=1):
+    """Open loop at phi_a = 9 deg (steady ~2 rad/s); last 10 s of truth, estimate, raw angle."""
+    p = Plant(config=PlantConfig(seed=seed, effects=effects_from_mapping(effects)), xi2=1.0)
+    p.open_loop(D(9), D(22))
+    obs = Observer(config=ObserverConfig(default_phi_a=D(9)))
+    rows = []
+    for _ in range(int(seconds / TICK)):
+        s = p.step()
+        if s is not None:
+            e = obs.step(s)
+            rows.append((s.t, p.wheel.s[2], e.xi2, s.angle, e.quality))
+    t, v, est, ang, qual = map(np.array, zip(*rows))
+    keep = t > seconds - 10.0
+    return t, v, est, ang, qual, keep, obs
+
+
+def rmse(a, b):
+    return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
+def test_observer_beats_the_finite_difference_on_a_10_bit_encoder():
+    t, v, est, ang, _, keep, obs = run(ENCODER)
+    assert np.mean(v[keep]) == pytest.approx(2.0, abs=0.1)            # steady ~2 rad/s
+    fd = finite_difference_speed(t, ang)
+    # a floor-quantised difference takes only the values k*COUNT/dt: with f the fractional
+    # count advanced per sample its RMSE is (COUNT/dt) sqrt(f (1 - f))
+    f = (np.mean(v[keep]) * TICK / COUNT) % 1.0
+    expected_fd = COUNT / TICK * math.sqrt(f * (1 - f))
+    assert rmse(fd[keep], v[keep]) == pytest.approx(expected_fd, rel=0.15)
+    assert rmse(est[keep], v[keep]) <= 0.02                            # issue target
+    assert rmse(est[keep], v[keep]) < rmse(fd[keep], v[keep]) / 20
+    assert obs.rejected == 0
+
+
+def test_glitches_are_rejected_and_counted():
+    fx = {**ENCODER, "encoder_glitches": {"enabled": True, "probability": {"value": 0.01, "unit": "1"}}}
+    t, v, est, ang, qual, keep, obs = run(fx)
+    n = len(t)
+    # glitches land anywhere on the revolution: all but the few within ~6 sigma are caught
+    assert obs.rejected == pytest.approx(0.01 * n, rel=0.25)
+    assert rmse(est[keep], v[keep]) <= 0.02
+    assert 0.8 < np.mean(qual[keep]) < 1.0                             # quality notices them
+
+
+def test_lost_samples_are_bridged_by_the_model():
+    fx = {**ENCODER, "dropouts": {"enabled": True, "probability": {"value": 0.05, "unit": "1"}}}
+    t, v, est, ang, _, keep, _ = run(fx)
+    assert np.max(np.diff(t)) > 2.5 * TICK                             # there were gaps
+    assert rmse(est[keep], v[keep]) <= 0.02
+
+
+def test_realistic_plant_model_mismatch():
+    # retention, actuator spread, COM offset, drag, rise lag, platform, noise, glitches,
+    # dropouts, latency: the nominal model in the observer is not the plant
+    t, v, est, ang, _, keep, _ = run(REALISTIC)
+    assert rmse(est[keep], v[keep]) <= 0.02
