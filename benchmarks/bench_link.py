@@ -53,6 +53,34 @@ def link_latency(seconds: float = 20.0) -> tuple[np.ndarray, np.ndarray]:
     return np.array(core.stats.latencies[300:]), e2e
 
 
+def reconnect_and_watchdog(trials: int = 5) -> tuple[list[float], float]:
+    """Seconds from a replug to telemetry with HV on again (per trial); watchdog delay [s]."""
+    rng = np.random.default_rng(0)
+    link = Path(tempfile.mkdtemp()) / "teensy"
+    dev = DeviceProcess(link, w0=2.0)
+    core = DriverCore(LinkConfig(str(link), enable_hv_on_connect=True)).start()
+    time.sleep(1.0)
+    back = []
+    for _ in range(trials):
+        c0 = core.stats.connects
+        dev.unplug()
+        time.sleep(float(rng.uniform(0.3, 1.2)))      # unplugged for a random while
+        core.last_telemetry = None
+        dev.plug()
+        t0 = time.monotonic()
+        while not (core.stats.connects > c0 and core.last_telemetry is not None
+                   and core.last_telemetry.hv_monitor > 0):
+            time.sleep(0.0005)
+        back.append(time.monotonic() - t0)
+        time.sleep(0.3)
+    core._running = False                              # the host falls silent
+    core._thread.join()
+    time.sleep(0.5)
+    rep = dev.stop()
+    core._close()
+    return back, rep.hv_off_t - rep.received[-1].t
+
+
 def main() -> None:
     cores = os.sched_getaffinity(0)
     os.sched_setaffinity(0, {min(cores)})
@@ -65,6 +93,10 @@ def main() -> None:
                       ("device wrote frame -> handed on    ", e2e)):
         print(f"  {name}: p50 {np.percentile(lat, 50) * 1e3:.3f} ms, p99 {np.percentile(lat, 99) * 1e3:.3f} ms"
               f" over {lat.size} frames on a pty at 300 Hz   (target p99 < 1 ms)")
+    back, wd = reconnect_and_watchdog()
+    print(f"  replug -> telemetry with HV on again : {', '.join(f'{b * 1e3:.0f}' for b in back)} ms"
+          f"   (target < 1000 ms; backoff cap 250 ms)")
+    print(f"  host silent -> device HV off         : {wd * 1e3:.1f} ms of device time   (target <= 100 ms)")
 
 
 if __name__ == "__main__":

@@ -66,6 +66,11 @@ def test_unreadable_and_malformed_files(tmp_path):
         load_wheel_params(_write(tmp_path, None, raw="wheel: {M: [unclosed"))
 
 
+def test_empty_file_is_a_clear_error(tmp_path):
+    with pytest.raises(ParameterError, match=r"expected a top-level 'wheel:' section"):
+        load_wheel_params(_write(tmp_path, None, raw=""))
+
+
 def test_nan_written_as_yaml_is_rejected(tmp_path):
     raw = yaml.safe_dump(_good()).replace("value: 0.979", "value: .nan")
     with pytest.raises(ParameterError, match=r"'M' = nan is not finite"):
