@@ -1,0 +1,28 @@
+"""Disturbance estimator (57)-(58): converges on a constant offset at the rate K implies."""
+import pytest
+
+from hasel_wheel_mpc.disturbance import IntegralEstimator
+
+
+@pytest.mark.parametrize("gain", [0.05, 0.2, 0.5, 1.0, 1.5])
+def test_constant_offset_closes_geometrically(gain):
+    est = IntegralEstimator(gain=gain)
+    e = 0.12                       # the wheel runs 0.12 rad/s faster than modelled
+    model = 2.0
+    for k in range(1, 40):
+        d = est.step(model + e, model, reference=2.0)
+        assert d == pytest.approx(e * (1 - (1 - gain) ** k), abs=1e-12)
+
+
+def test_gated_outside_the_band_near_the_reference():
+    est = IntegralEstimator(gain=0.5, gate=0.64)
+    assert est.step(1.1, 1.0, reference=2.0) == 0.0          # 1.0 rad/s away: off
+    assert est.step(1.5, 1.4, reference=2.0) == pytest.approx(0.05)   # 0.6 rad/s: on
+    assert est.updates == 1
+
+
+@pytest.mark.parametrize("gain, match", [(0.0, "0 < K < 2"), (2.0, "0 < K < 2"),
+                                         (float("nan"), "0 < K < 2")])
+def test_unstable_gains_are_refused(gain, match):
+    with pytest.raises(ValueError, match=match):
+        IntegralEstimator(gain=gain)
