@@ -78,6 +78,7 @@ class DriverCore:
         self._ack_cv = threading.Condition()
         self._running = False
         self._closing = False
+        self.reader_failed: str | None = None   # set if the link thread died of an error
         self._thread: threading.Thread | None = None
         self._last_rx = 0.0
         self._next_hb = 0.0
@@ -158,12 +159,17 @@ class DriverCore:
         d = self.decoder.stats
         lat = sorted(self.stats.latencies[-3000:])
         p99 = lat[int(0.99 * (len(lat) - 1))] if lat else float("nan")
-        t = self.last_telemetry
+        up = self.connected and not self.stale
+        t = self.last_telemetry if up else None
         return {"connected": str(self.connected), "stale": str(self.stale),
+                "link_thread": "alive" if self._thread and self._thread.is_alive() else
+                               f"stopped{': ' + self.reader_failed if self.reader_failed else ''}",
                 "hv_requested": str(self.hv_requested),
-                "hv_on": str(bool(t and t.hv_monitor > 0)),
-                "fault_flags": str(t.fault_flags if t else 0),
-                "frames": str(d.frames), "frame_rate_hz": f"{self.frame_rate:.1f}",
+                "hv_on": str(bool(t.hv_monitor > 0)) if t else "unknown (no link)",
+                "fault_flags": str(t.fault_flags) if t else "unknown (no link)",
+                "frames": str(d.frames), "frame_rate_hz": f"{self.frame_rate if up else 0.0:.1f}",
+                "version_or_type_errors": str(d.version_errors + d.type_errors),
+                "device_restarts": str(d.restarts),
                 "crc_errors": str(d.crc_errors),
                 "framing_errors": str(d.framing_errors + d.oversize + d.length_errors),
                 "sequence_gaps": str(d.sequence_gaps), "reconnects": str(self.stats.connects),
@@ -184,7 +190,7 @@ class DriverCore:
         so HV(0) stays the last frame on the wire whatever other threads try to send.
         """
         with self._write_lock:
-            if self._closing and not closing:
+            if (self._closing or self.reader_failed) and not closing:
                 return None
             self._counter = (self._counter + 1) & 0xFFFF
             counter = self._counter
@@ -193,7 +199,9 @@ class DriverCore:
                 self.stats.write_errors += 1
                 return counter
             try:
-                ser.write(P.encode(msg, counter))
+                # a leading delimiter: whatever half frame an interrupted write left on the
+                # wire ends here, so it cannot swallow this frame (e.g. the final HV(0))
+                ser.write(b"\x00" + P.encode(msg, counter))
             except (serial.SerialException, OSError):
                 self.stats.write_errors += 1
         return counter
@@ -203,6 +211,8 @@ class DriverCore:
             ser = serial.Serial(self.config.port, timeout=0, write_timeout=0.05, exclusive=True)
         except (serial.SerialException, OSError, ValueError):
             return False
+        with self._write_lock:
+            self._counter = 0          # protocol 6: our first frame after (re)connect is 1
         self._ser = ser
         self.decoder = P.FrameDecoder()
         self.connected = True
@@ -212,6 +222,8 @@ class DriverCore:
         self._last_rx = now
         self._next_hb = now
         self.on_event("connected")
+        # the device may not have rebooted (a short loss): make its HV state known, off
+        self._write(P.Hv(0), closing=True)
         if self.config.device_config is not None:
             self._write(self.config.device_config)
         if self.config.enable_hv_on_connect and not self._closing:
@@ -237,6 +249,16 @@ class DriverCore:
         self.on_event(f"link lost: {why}")
 
     def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as exc:  # noqa: BLE001 - a dying link thread must leave HV off
+            self.reader_failed = repr(exc)
+            self._write(P.Estop(), closing=True)
+            self._write(P.Hv(0), closing=True)
+            self._close()
+            self.on_event(f"link thread failed, sent ESTOP and HV off: {exc!r}")
+
+    def _loop(self) -> None:
         backoff = self.config.backoff_min
         while self._running:
             if self._ser is None:

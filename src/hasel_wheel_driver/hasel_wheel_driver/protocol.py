@@ -18,6 +18,7 @@ VERSION = 1
 MAX_RAW = 64                 # raw frame bytes (header + payload + crc)
 MAX_STUFFED = MAX_RAW + 2    # COBS adds at most one byte per 254, plus one
 SECTOR = math.pi / 8.0
+ANGLE_TOLERANCE = 1e-6       # slack on +-pi/8 [rad]: float32(pi/8) exceeds pi/8 by ~4e-9
 
 # message types
 TELEMETRY, ACK, REJECT = 0x01, 0x02, 0x03
@@ -148,6 +149,7 @@ class DecoderStats:
     type_errors: int = 0
     length_errors: int = 0
     sequence_gaps: int = 0
+    restarts: int = 0
     bytes: int = 0
 
     @property
@@ -219,7 +221,9 @@ class FrameDecoder:
         msg = cls._make(fmt.unpack_from(raw, _HEADER.size))
         if self._last_counter is not None:
             gap = (counter - self._last_counter) & 0xFFFF
-            if gap > 1:
+            if gap > 0x8000:       # far "behind": the peer restarted, nothing was lost
+                st.restarts += 1
+            elif gap > 1:
                 st.sequence_gaps += gap - 1
         self._last_counter = counter
         st.frames += 1
@@ -231,7 +235,7 @@ def check_command(n_a: int, phi_a: float, phi_d: float) -> int:
     if not 0 <= n_a <= 15:
         return R_N_A
     for v in (phi_a, phi_d):
-        if not math.isfinite(v) or abs(v) > SECTOR + 1e-6:
+        if not math.isfinite(v) or abs(v) > SECTOR + ANGLE_TOLERANCE:
             return R_ANGLE
     if not phi_a < phi_d or (phi_a < 0.0 < phi_d):
         return R_ORDER
@@ -241,5 +245,5 @@ def check_command(n_a: int, phi_a: float, phi_d: float) -> int:
 def check_config(c: Config) -> int:
     """0 if the configuration is acceptable, else R_CONFIG (protocol rule 7)."""
     ok = 50 <= c.telemetry_rate_hz <= 1000 and 20 <= c.watchdog_ms <= 1000 \
-        and 10 <= c.max_on_ms <= 10000 and c.drain_mode in (0, 1)
+        and 10 <= c.max_on_ms <= 10000 and c.drain_mode == 0
     return 0 if ok else R_CONFIG

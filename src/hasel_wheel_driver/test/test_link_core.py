@@ -67,3 +67,60 @@ def test_nothing_follows_hv_off_on_the_wire_during_shutdown():
     assert refused and all(r.startswith("shutting down") for r in refused)
     os.close(master)
     os.close(slave)
+
+
+def _read_all(fd, quiet=0.05):
+    """Everything the host wrote, until the line has been quiet for ``quiet`` seconds."""
+    import select
+    out = b""
+    while select.select([fd], [], [], quiet)[0]:
+        out += os.read(fd, 65536)
+    return out
+
+
+def _pty_core(**kw):
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    os.set_blocking(master, False)
+    return master, slave, DriverCore(LinkConfig(os.ttyname(slave), **kw))
+
+
+def test_every_connect_first_switches_hv_off():
+    # a short loss: the device did not reboot; its HV state must be made known (off) first
+    master, slave, core = _pty_core(enable_hv_on_connect=True)
+    core._open()
+    frames = P.FrameDecoder().feed(_read_all(master))
+    assert [f.message for f in frames][:3] == [P.Hv(0), P.ClearEstop(), P.Hv(1)]
+    assert frames[0].counter == 1
+    core._close()
+    os.close(master)
+    os.close(slave)
+
+
+def test_a_dying_link_thread_leaves_hv_off_and_silences_everyone():
+    master, slave, core = _pty_core()
+
+    def broken(data, t):
+        raise RuntimeError("decoder bug")
+    core._handle = broken
+    core.start()
+    import time
+    t_end = time.monotonic() + 2.0
+    while not core.connected and time.monotonic() < t_end:
+        time.sleep(0.005)
+    os.write(master, P.encode(P.Telemetry(1, 1, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0, 0), 1))
+    core._thread.join(2.0)
+    assert not core._thread.is_alive() and "decoder bug" in core.reader_failed
+    assert not core.connected
+    assert core.send_command(Command(3, 0.05, 0.3)) is not None   # nothing more goes out
+    frames = [f.message for f in P.FrameDecoder().feed(_read_all(master))]
+    assert frames[-2:] == [P.Estop(), P.Hv(0)]
+    assert "stopped" in core.diagnostics()["link_thread"]
+    os.close(master)
+    os.close(slave)
+
+
+def test_a_device_restart_is_not_counted_as_lost_frames():
+    d = P.FrameDecoder()
+    d.feed(b"".join(P.encode(P.Hv(0), c) for c in (500, 501, 1, 2)))
+    assert d.stats.sequence_gaps == 0 and d.stats.restarts == 1

@@ -24,6 +24,7 @@ from hasel_wheel_driver import protocol as P
 
 from . import layout as L
 from .integrator import advance
+from .model import SECTOR
 from .plant import COUNT, Plant
 from .wheel import TICK
 
@@ -70,7 +71,10 @@ class Firmware:
                 return reject(P.R_ESTOP)
             if not self.hv_enabled:
                 return reject(P.R_HV_DISABLED)
-            self.plant.wheel.command(m.n_a, float(m.phi_a), float(m.phi_d), m.command_seq)
+            # float32 angles may exceed pi/8 by a rounding step: clamp into the range
+            pa = min(max(float(m.phi_a), -SECTOR), SECTOR)
+            pd = min(max(float(m.phi_d), -SECTOR), SECTOR)
+            self.plant.wheel.command(m.n_a, pa, pd, m.command_seq)
             self.faults &= ~(P.F_REJECTED | P.F_MAX_ON)
         elif isinstance(m, P.Hv):
             if m.enable:
@@ -177,6 +181,7 @@ class VirtualTeensy:
         self.sent: list[SentFrame] = []
         self.received: list[HostFrame] = []
         self.write_drops = 0
+        self.faults_seen: list[str] = []     # firmware exceptions (each cut HV)
         self._state = _State()
         self._lock = threading.Lock()
         self._master = -1
@@ -237,21 +242,24 @@ class VirtualTeensy:
 
     # -- the device loop ------------------------------------------------------------------
     def _run(self) -> None:
-        period = TICK / self.time_scale
         next_tick = time.monotonic()
         while self._state.running:
             now = time.monotonic()
             if now >= next_tick:
-                next_tick += period
+                next_tick += 1.0 / self.fw.config.telemetry_rate_hz / self.time_scale
                 if next_tick < now - 1.0:          # far behind (debugger, suspend): re-anchor
                     next_tick = now + period
                 with self._lock:
-                    if self._state.plugged and now >= self._state.stall_until:
-                        self._read_host()
-                        tel = self.fw.tick()
-                        self._send(tel)
-                    elif self._state.plugged:
-                        self.fw.tick()             # physics go on; the device is mute
+                    try:
+                        if self._state.plugged and now >= self._state.stall_until:
+                            self._read_host()
+                            tel = self.fw.tick()
+                            self._send(tel)
+                        elif self._state.plugged:
+                            self.fw.tick()         # physics go on; the device is mute
+                    except Exception as exc:  # noqa: BLE001 - firmware must fail safe
+                        self.faults_seen.append(repr(exc))
+                        self.fw._hv_off()          # any firmware error: HV off, keep running
                 continue
             fd = self._master
             timeout = max(0.0, min(next_tick - now, 0.002))
@@ -326,6 +334,7 @@ class DeviceReport:
     t: float
     speed: float
     write_drops: int
+    faults_seen: list[str] = field(default_factory=list)
 
 
 def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> None:
@@ -348,7 +357,8 @@ def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> No
             vt.stop()
             conn.send(DeviceReport(vt.sent, vt.received, vt.fw.hv_enabled, vt.fw.estop,
                                    vt.fw.faults, vt.fw.hv_off_t, vt.fw.plant.t,
-                                   float(vt.fw.plant.wheel.s[L.S_XI2]), vt.write_drops))
+                                   float(vt.fw.plant.wheel.s[L.S_XI2]), vt.write_drops,
+                                   vt.faults_seen))
             return
         conn.send(None)
 
@@ -372,9 +382,10 @@ class DeviceProcess:
                                  args=(child, plant_config or PlantConfig(switching="tick"), params,
                                        w0, str(link), time_scale, faults))
         self._proc.start()
-        t_end = time.monotonic() + 30.0
+        t_end = time.monotonic() + 180.0       # a fresh clone compiles the core first
         while not self.link.is_symlink():      # the child compiles and plugs in
             if time.monotonic() > t_end or not self._proc.is_alive():
+                self._proc.kill()
                 raise RuntimeError("the virtual Teensy process did not come up")
             time.sleep(0.01)
 

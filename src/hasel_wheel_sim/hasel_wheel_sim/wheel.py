@@ -29,6 +29,11 @@ _RULES = {"after_active": L.AUTO_AFTER_ACTIVE, "after_measured": L.AUTO_AFTER_ME
 _MODES = {"exact": L.MODE_EXACT, "tick": L.MODE_TICK}
 
 
+#: Slack on the +-pi/8 limit [rad]: angles travel as float32 (float32(pi/8) > pi/8 by 4e-9),
+#: the same slack as the protocol's check.
+ANGLE_TOLERANCE = 1e-6
+
+
 class CommandError(ValueError):
     """An actuation command is not acceptable; the message says what would be."""
 
@@ -43,7 +48,7 @@ def validate_command(n_a: int, phi_a: float, phi_d: float) -> None:
         if not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
             raise CommandError(f"{name} = {v!r} is not a finite angle; expected rad in "
                                f"[-pi/8, pi/8]")
-        if abs(v) > SECTOR + 1e-12:
+        if abs(v) > SECTOR + ANGLE_TOLERANCE:
             raise CommandError(f"{name} = {v!r} rad is outside [-pi/8, pi/8] = "
                                f"[-{SECTOR:.6f}, {SECTOR:.6f}] rad")
     if not phi_a < phi_d:
