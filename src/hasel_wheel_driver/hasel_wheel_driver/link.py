@@ -81,7 +81,8 @@ class DriverCore:
         self.reader_failed: str | None = None   # set if the link thread died of an error
         self._thread: threading.Thread | None = None
         self._last_rx = 0.0
-        self._next_hb = 0.0
+        self._loop_t = 0.0
+        self._hb_thread: threading.Thread | None = None
         self._cmd_seq = 0
         self._rate_t0 = clock()
         self._rate_n0 = 0
@@ -90,9 +91,26 @@ class DriverCore:
     # -- public API ------------------------------------------------------------------------
     def start(self) -> "DriverCore":
         self._running = True
+        self._loop_t = self.clock()
         self._thread = threading.Thread(target=self._run, name="hasel-link", daemon=True)
         self._thread.start()
+        self._hb_thread = threading.Thread(target=self._heartbeats, name="hasel-link-hb",
+                                           daemon=True)
+        self._hb_thread.start()
         return self
+
+    #: Heartbeats stop when the reader loop has not turned for this long [s], so a wedged host
+    #: still lets the device's watchdog switch HV off.
+    READER_STALL = 0.5
+
+    def _heartbeats(self) -> None:
+        """Send HEARTBEAT every period from its own thread, so slow sample consumers (bag
+        writing, a controller) cannot starve the device's watchdog."""
+        while self._running:
+            now = self.clock()
+            if self.connected and not self._closing and now - self._loop_t < self.READER_STALL:
+                self._write(P.Heartbeat(int(now * 1e6)))
+            time.sleep(self.config.heartbeat_period)
 
     def send_command(self, cmd: Command) -> str | None:
         """Validate and send u; return why it was refused (nothing sent), or None."""
@@ -150,8 +168,9 @@ class DriverCore:
             c2 = self._write(P.Hv(0), closing=True)
             ok = isinstance(self.wait_ack(c1), P.Ack) & isinstance(self.wait_ack(c2), P.Ack)
         self._running = False
-        if self._thread and self._thread is not threading.current_thread():
-            self._thread.join(timeout=1.0)
+        for th in (self._thread, self._hb_thread):
+            if th and th is not threading.current_thread():
+                th.join(timeout=1.0)
         self._close()
         return ok
 
@@ -220,7 +239,6 @@ class DriverCore:
         self.stats.connects += 1
         now = self.clock()
         self._last_rx = now
-        self._next_hb = now
         self.on_event("connected")
         # the device may not have rebooted (a short loss): make its HV state known, off
         self._write(P.Hv(0), closing=True)
@@ -282,9 +300,7 @@ class DriverCore:
             if data:
                 self._handle(data, self.clock())
             now = self.clock()
-            if not self._closing and now >= self._next_hb:
-                self._next_hb = now + self.config.heartbeat_period
-                self._write(P.Heartbeat(int(now * 1e6)))
+            self._loop_t = now
             if not self.stale and now - self._last_rx > self.config.link_timeout:
                 self.stale = True
                 self.stats.stale_events += 1

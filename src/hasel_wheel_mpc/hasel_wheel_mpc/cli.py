@@ -156,7 +156,8 @@ def cmd_link_run(args: argparse.Namespace) -> int:
 
     cfg = P.Config(watchdog_ms=int(min(1000, 100 * max(1.0, args.time_scale))))
     core = DriverCore(LinkConfig(str(link), enable_hv_on_connect=True, device_config=cfg),
-                      on_sample=on_sample).start()
+                      on_sample=on_sample,
+                      on_event=lambda e: print(f"  link: {e}", file=sys.stderr)).start()
     try:
         t_end = time.monotonic() + args.seconds / args.time_scale
         while time.monotonic() < t_end:
@@ -171,7 +172,9 @@ def cmd_link_run(args: argparse.Namespace) -> int:
     print(f"  frames decoded {d.frames}, CRC errors {d.crc_errors}, framing errors "
           f"{d.framing_errors + d.oversize + d.length_errors}, sequence gaps {d.sequence_gaps}")
     print(f"  commands sent {core.stats.commands_sent}, device rejects {core.stats.rejects}, "
-          f"shutdown HV off {'confirmed' if acked else 'NOT confirmed'}; bag: {bag_dir}")
+          f"watchdog trips {core.stats.watchdog_trips}, stale-link events "
+          f"{core.stats.stale_events}, shutdown HV off {'confirmed' if acked else 'NOT confirmed'}")
+    print(f"  bag: {bag_dir}")
     return 0
 
 

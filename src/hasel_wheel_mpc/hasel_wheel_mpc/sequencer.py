@@ -25,7 +25,7 @@ class Sequencer:
         due = s.q == 1 and self._prev_q == 0
         self._prev_q = s.q
         self._idle = 0 if s.q else self._idle + 1
-        if s.hv_monitor > 0 and (due or self._idle == self.restart_after or self.seq == 0):
+        if s.hv_monitor > 0 and (due or self._idle >= self.restart_after or self.seq == 0):
             self._idle = 0
             self.seq += 1
             return Command((s.eta_unwrapped + 1) % 16, self.phi_a, self.phi_d, self.seq)

@@ -92,3 +92,17 @@ def test_trials_take_paired_phi_a_phi_d():
     with pytest.raises(ParameterError, match="trial 0: phi_a = .* must be smaller than phi_d"):
         trials_from_mapping({"phi_a": {"value": r(12), "unit": "rad"},
                              "phi_d": {"value": r(11), "unit": "rad"}})
+
+
+def test_link_run_drives_the_wheel_over_a_pty_and_records(tmp_path, capsys):
+    assert cli.main(["link-run", "--seconds", "12", "--time-scale", "4",
+                     "--out", str(tmp_path / "lr")]) == 0
+    out = capsys.readouterr().out
+    assert "CRC errors 0, framing errors 0, sequence gaps 0" in out
+    assert "device rejects 0" in out and "HV off confirmed" in out
+    speed = float(out.split("final speed ")[1].split()[0])
+    assert speed > 2.5                                    # driven from 2 rad/s at 3 deg
+    info = yaml.safe_load((tmp_path / "lr" / "bag" / "metadata.yaml").read_text())
+    counts = {t["topic_metadata"]["name"]: t["message_count"]
+              for t in info["rosbag2_bagfile_information"]["topics_with_message_count"]}
+    assert counts["/wheel0/telemetry"] > 12 * 300 * 0.9 and counts["/wheel0/command"] > 50

@@ -24,3 +24,12 @@ def test_no_commands_while_hv_is_off_and_restart_when_idle():
     assert s.step(sample(0, 2, hv=0.0)) is None
     assert s.step(sample(0, 2)).sequence == 1
     assert [s.step(sample(0, 2)) for _ in range(3)][-1].sequence == 2
+
+
+def test_restart_is_not_lost_when_hv_is_off_at_that_moment():
+    s = Sequencer(0.05, 0.38, restart_after=3)
+    assert s.step(sample(0, 2)).sequence == 1
+    s.step(sample(0, 2))
+    s.step(sample(0, 2))
+    assert s.step(sample(0, 2, hv=0.0)) is None            # due now, but HV is off
+    assert s.step(sample(0, 2)).sequence == 2              # restarts as soon as HV is back

@@ -257,6 +257,9 @@ class VirtualTeensy:
                             self._send(tel)
                         elif self._state.plugged:
                             self.fw.tick()         # physics go on; the device is mute
+                        else:                      # unplugged: unpowered, HV off, wheel coasts
+                            self.fw.plant.wheel.cut_hv()
+                            self.fw.plant.step(None, 1.0 / self.fw.config.telemetry_rate_hz)
                     except Exception as exc:  # noqa: BLE001 - firmware must fail safe
                         self.faults_seen.append(repr(exc))
                         self.fw._hv_off()          # any firmware error: HV off, keep running
