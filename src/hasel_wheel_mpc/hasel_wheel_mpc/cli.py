@@ -174,6 +174,13 @@ def cmd_link_run(args: argparse.Namespace) -> int:
     print(f"  commands sent {core.stats.commands_sent}, device rejects {core.stats.rejects}, "
           f"watchdog trips {core.stats.watchdog_trips}, stale-link events "
           f"{core.stats.stale_events}, shutdown HV off {'confirmed' if acked else 'NOT confirmed'}")
+    lt = core.last_telemetry
+    if lt is not None:
+        print(f"  last sample: HV {lt.hv_monitor:.0f} V, q {lt.q}, eta {lt.eta_unwrapped}, "
+              f"latched command {lt.last_command_seq}, faults {lt.fault_flags}; "
+              f"sequencer sent {seq.seq}")
+    if rep.faults_seen:
+        print(f"  device firmware errors (each switched HV off): {rep.faults_seen[:3]}")
     print(f"  bag: {bag_dir}")
     return 0
 

@@ -6,7 +6,11 @@ switches off.  ``step(sample) -> Command | None`` is the whole contract.
 """
 from __future__ import annotations
 
+import math
+
 from hasel_wheel_driver.samples import Command, TelemetrySample
+
+SECTOR = math.pi / 8.0
 
 
 class Sequencer:
@@ -28,5 +32,8 @@ class Sequencer:
         if s.hv_monitor > 0 and (due or self._idle >= self.restart_after or self.seq == 0):
             self._idle = 0
             self.seq += 1
-            return Command((s.eta_unwrapped + 1) % 16, self.phi_a, self.phi_d, self.seq)
+            # at a switch-on: the pad after the one that switched on; when starting or
+            # restarting: the pad after the sector the encoder measures now (eq. (40))
+            base = s.eta_unwrapped if due else math.floor(s.angle / SECTOR)
+            return Command((base + 1) % 16, self.phi_a, self.phi_d, self.seq)
         return None

@@ -97,7 +97,9 @@ def test_trials_take_paired_phi_a_phi_d():
 def test_link_run_drives_the_wheel_over_a_pty_and_records(tmp_path, capsys):
     assert cli.main(["link-run", "--seconds", "12", "--time-scale", "4",
                      "--out", str(tmp_path / "lr")]) == 0
-    out = capsys.readouterr().out
+    cap = capsys.readouterr()
+    out = cap.out
+    print(out, cap.err)
     assert "CRC errors 0, framing errors 0, sequence gaps 0" in out
     assert "device rejects 0" in out and "HV off confirmed" in out
     speed = float(out.split("final speed ")[1].split()[0])

@@ -80,19 +80,20 @@ def test_no_faults_no_frame_lost_and_every_command_latched_at_switch_off(tmp_pat
         speed = vt.status()["speed"]
         rate = float(core.diagnostics()["frame_rate_hz"])
     finally:
+        rep = vt.stop()             # the device first, then let the host read what is left
+        time.sleep(0.2)
         core.shutdown()
-        rep = vt.stop()
+    assert rep.faults_seen == []                                # no firmware exception
     st = core.decoder.stats
     telemetry_sent = [f for f in rep.sent if f.type == P.TELEMETRY]
     assert st.dropped == 0 and st.sequence_gaps == 0 and rep.write_drops == 0
-    # every frame up to the host's shutdown arrived, in order; only those still in flight
-    # when it stopped reading (a few ms at 1500 frames/s) were never read
+    # every telemetry frame the device sent arrived, in order
     assert [s.sequence for s in seq.samples] == list(range(1, len(seq.samples) + 1))
-    assert len(seq.samples) >= 60 * 300 and 0 <= len(telemetry_sent) - len(seq.samples) <= 15
+    assert len(seq.samples) == len(telemetry_sent) >= 60 * 300
     assert speed > 2.5 and core.stats.rejects == 0              # driven, nothing refused
     assert rate == pytest.approx(300 * SCALE, rel=0.1)          # diagnostics: frames per second
     # protocol rule 3, judged against each command's arrival on the device: latched on the
-    # first tick after arrival when the wheel idles, else on the first switch-off after it
+    # first tick after arrival when no actuator is on, else on that actuator's switch-off
     arrived = {h.frame.message.command_seq: h.t for h in rep.received
                if h.frame.type == P.COMMAND}
     s = seq.samples
@@ -100,15 +101,18 @@ def test_no_faults_no_frame_lost_and_every_command_latched_at_switch_off(tmp_pat
     checked = idle = 0
     for _k, seq_no, pad in seq.sent[:-2]:
         t_arr = arrived[seq_no]
-        i = next(j for j in range(len(s)) if t[j] > t_arr + 1e-9)   # first tick after arrival
-        if s[i - 1].last_command_sequence == 0:                   # idle: nothing latched yet
+        i = next(j for j in range(len(s)) if t[j] > t_arr + 1e-6)   # next tick (t has us rounding)
+        if s[i - 1].q == 0:                                       # no actuator on: next tick
             off = i
             idle += 1
-        else:                                                     # a target is latched
+        else:                                                     # on: at its switch-off
             off = next(j for j in range(i, len(s)) if s[j].q == 0 and s[j - 1].q == 1)
             assert all(x.last_command_sequence != seq_no for x in s[i:off])
             checked += 1
-        assert s[off].last_command_sequence == seq_no
+        assert s[off].last_command_sequence == seq_no, (
+            f"command {seq_no} arrived at t={t_arr!r}; ticks around: "
+            f"{[(x.t, x.q, x.last_command_sequence) for x in s[max(i - 3, 0):i + 3]]}; "
+            f"host frames then: {[(h.t, h.frame.message) for h in rep.received if abs(h.t - t_arr) < 0.02 and h.frame.type != P.HEARTBEAT]}")
         on = next(j for j in range(off, len(s)) if s[j].q == 1)
         assert s[on].eta == pad and s[on].last_command_sequence == seq_no
     assert checked > 300 and idle >= 1

@@ -5,8 +5,9 @@ from hasel_wheel_driver.samples import TelemetrySample
 from hasel_wheel_mpc.sequencer import Sequencer
 
 
-def sample(q, eta_u, hv=9000.0):
-    return TelemetrySample(0.0, 0, 0, 0, 0.0, q, eta_u % 16, eta_u, 0, hv, 0.0, 0, 0)
+def sample(q, eta_u, hv=9000.0, angle=None):
+    angle = (eta_u + 0.5) * math.pi / 8 if angle is None else angle
+    return TelemetrySample(0.0, 0, 0, 0, angle, q, eta_u % 16, eta_u, 0, hv, 0.0, 0, 0)
 
 
 def test_commands_next_pad_at_switch_on_only():
@@ -33,3 +34,9 @@ def test_restart_is_not_lost_when_hv_is_off_at_that_moment():
     s.step(sample(0, 2))
     assert s.step(sample(0, 2, hv=0.0)) is None            # due now, but HV is off
     assert s.step(sample(0, 2)).sequence == 2              # restarts as soon as HV is back
+
+
+def test_restart_counts_from_the_measured_sector_not_a_stale_target():
+    # the actuator of interest says 17, but the wheel stopped in sector 5
+    s = Sequencer(0.05, 0.38)
+    assert s.step(sample(0, 17, angle=5.5 * math.pi / 8)).n_a == 6

@@ -202,7 +202,9 @@ def advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
     switched (on/off) or the target latched (arm).
     """
     n_ev = 0
-    if s[L.S_ARMED] == 0.0 and s[L.S_Q] == 0.0:
+    # while no actuator is on, a waiting command takes effect now: it arms an idle wheel or
+    # replaces a target that has not switched on (which a stopped wheel might never reach)
+    if s[L.S_Q] == 0.0 and (s[L.S_ARMED] == 0.0 or s[L.S_PEND] != 0.0):
         if _next_command(s):
             n_ev = _record(ev, n_ev, s, L.EV_ARM)
     exact = s[L.S_MODE] == L.MODE_EXACT

@@ -123,7 +123,8 @@ class HybridWheel:
 
     # -- inputs ---------------------------------------------------------------------------
     def command(self, n_a: int, phi_a: float, phi_d: float, seq: int = 0) -> None:
-        """Queue u; it is latched at the next switch-off (or at once if the wheel idles)."""
+        """Queue u.  While an actuator is on, it is latched when that actuator switches off;
+        otherwise (idle, or a target that has not switched on yet) at the next step."""
         validate_command(n_a, phi_a, phi_d)
         s = self.s
         s[L.S_PEND] = 1.0

@@ -179,3 +179,25 @@ def test_idle_wheel_coasts_and_arms_when_a_command_arrives(params):
     ev = w.advance()
     assert ev[0, 2] == L.EV_ARM and ev[0, 3] == 3     # first future switch-on of pad 3
     assert w.s[L.S_CMD_SEQ] == 7
+
+
+def test_a_command_replaces_a_target_that_has_not_switched_on(params):
+    # a target one revolution ahead that a slow wheel will never reach must not block
+    w = HybridWheel(params, xi1=D(30), xi2=0.5)          # past pad 1's switch-on at 25.5 deg
+    w.command(1, D(3), D(22), seq=1)
+    ev = w.advance()
+    assert ev[0, 2] == L.EV_ARM and ev[0, 3] == 17        # first future switch-on: next turn
+    w.command(2, D(3), D(22), seq=2)                      # q = 0: takes effect now
+    ev = w.advance()
+    assert ev[0, 2] == L.EV_ARM and ev[0, 3] == 2 and w.s[L.S_CMD_SEQ] == 2
+    # while an actuator is on, a new command still waits for its switch-off
+    w2 = HybridWheel(params, xi1=2 * SECTOR + D(1), xi2=2.0)
+    w2.command(2, D(3), D(22), seq=1)
+    for _ in range(20):
+        w2.advance()
+        if w2.s[L.S_Q] == 1.0:
+            break
+    assert w2.s[L.S_Q] == 1.0
+    w2.command(3, D(3), D(22), seq=2)
+    w2.advance()
+    assert w2.s[L.S_CMD_SEQ] == 1 and w2.s[L.S_Q] == 1.0
