@@ -141,6 +141,7 @@ class LinkFaults:
     corrupt: float = 0.0   # a byte is XORed with a random non-zero value
     drop: float = 0.0      # a byte is lost
     seed: int = 0
+    host_corrupt: float = 0.0   # likewise on the host -> device stream (per byte)
 
 
 @dataclass
@@ -284,6 +285,9 @@ class VirtualTeensy:
             return
         except OSError:           # the host side is closed: nothing to read
             return
+        if self.faults.host_corrupt:
+            data = bytes(b ^ self._rng.randrange(1, 256) if self._rng.random() < self.faults.host_corrupt
+                         else b for b in data)
         for frame in self.decoder.feed(data):
             self.received.append(HostFrame(self.fw.plant.t, frame))
             self._send(self.fw.receive(frame))
@@ -338,6 +342,7 @@ class DeviceReport:
     speed: float
     write_drops: int
     faults_seen: list[str] = field(default_factory=list)
+    host_stream_dropped: int = 0    # host frames the device dropped (CRC, framing, ...)
 
 
 def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> None:
@@ -361,7 +366,7 @@ def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> No
             conn.send(DeviceReport(vt.sent, vt.received, vt.fw.hv_enabled, vt.fw.estop,
                                    vt.fw.faults, vt.fw.hv_off_t, vt.fw.plant.t,
                                    float(vt.fw.plant.wheel.s[L.S_XI2]), vt.write_drops,
-                                   vt.faults_seen))
+                                   vt.faults_seen, vt.decoder.stats.dropped))
             return
         conn.send(None)
 
