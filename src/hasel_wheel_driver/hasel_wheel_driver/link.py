@@ -8,7 +8,6 @@ whenever there is doubt: on a stale or lost link it sends ESTOP and then HV(0), 
 """
 from __future__ import annotations
 
-import math
 import select
 import threading
 import time
@@ -18,9 +17,8 @@ from typing import Callable
 import serial
 
 from . import protocol as P
+from .samples import ENCODER_COUNT as COUNT
 from .samples import Command, TelemetrySample
-
-COUNT = 2.0 * math.pi / 1024.0
 
 
 @dataclass(frozen=True)

@@ -11,6 +11,8 @@ import math
 from typing import NamedTuple
 
 ENCODER_COUNTS = 1024
+#: One encoder count [rad] (10-bit absolute encoder).
+ENCODER_COUNT = 2.0 * math.pi / ENCODER_COUNTS
 MODE_ACCELERATE = 0
 MODE_BRAKE = 1
 

@@ -25,14 +25,14 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hasel_wheel_driver.samples import ENCODER_COUNTS, TelemetrySample
+from hasel_wheel_driver.samples import ENCODER_COUNT as COUNT
+from hasel_wheel_driver.samples import TelemetrySample
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import rk4
 from hasel_wheel_sim.model import SECTOR, Extensions, param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.wheel import initial_state
 
-COUNT = 2.0 * math.pi / ENCODER_COUNTS
 
 
 @dataclass(frozen=True)

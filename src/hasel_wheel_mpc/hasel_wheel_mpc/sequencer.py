@@ -9,8 +9,7 @@ from __future__ import annotations
 import math
 
 from hasel_wheel_driver.samples import Command, TelemetrySample
-
-SECTOR = math.pi / 8.0
+from hasel_wheel_sim.model import SECTOR
 
 
 class Sequencer:

@@ -16,14 +16,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from hasel_wheel_driver.samples import ENCODER_COUNTS, Command, TelemetrySample
+from hasel_wheel_driver.samples import ENCODER_COUNT, ENCODER_COUNTS, Command, TelemetrySample
 
 from . import layout as L
 from .effects import EffectsConfig, effects_from_mapping
 from .params import ParameterError, WheelParams, load_yaml_file
 from .wheel import TICK, HybridWheel, SwitchMode
 
-COUNT = 2.0 * math.pi / ENCODER_COUNTS  # one encoder count [rad]
+COUNT = ENCODER_COUNT  # one encoder count [rad]
 HV_SUPPLY_V = 9000.0                    # HV converter output while HV is enabled [V]
 ACTUATOR_CURRENT_A = 3e-4               # supply current while an actuator charges [A]
 
