@@ -81,6 +81,18 @@ def libm_floor_ns(n: int = 5_000_000) -> float:
     return best
 
 
+def numpy_costs(n: int = 256) -> tuple[float, float]:
+    """(numpy call overhead [us], per-element cost of log+exp+sin [ns]) at N wheels."""
+    import timeit
+    a = np.random.default_rng(0).random(n) + 0.1
+    b = np.empty(n)
+    call = min(timeit.repeat(lambda: np.add(a, a, out=b), number=20000, repeat=3)) / 20000
+    big = np.random.default_rng(0).random(65536) + 0.1
+    trio = min(timeit.repeat(lambda: (np.log(big), np.exp(big), np.sin(big)), number=50,
+                             repeat=3)) / 50 / big.size
+    return call * 1e6, trio * 1e9
+
+
 def main() -> None:
     cores = os.sched_getaffinity(0)
     batch(4, 1.0, 1)                                            # compile outside the timing
@@ -105,6 +117,11 @@ def main() -> None:
     ns = libm_floor_ns()
     print(f"  one log + exp + sin, compiled       : {ns:8.1f} ns; an RK4 step needs 4 of them, so RK4 at")
     print(f"  h = 1/300 s cannot beat {1e9 / (4 * ns * 300):8.0f} wheel-s per wall-s per core (libm floor)")
+    call_us, elem_ns = numpy_costs()
+    print(f"  numpy instead (why the batch is compiled): {call_us:.2f} us per call at N = 256, "
+          f"{elem_ns:.1f} ns per element for log+exp+sin;")
+    print(f"  an (N,)-array RK4 needs ~75 calls per step: >= {75 * call_us:.0f} us per step at N = 256, "
+          f"<= {256 / (75 * call_us * 1e-6) / 300:.0f} wheel-s per wall-s before any event handling")
 
 
 if __name__ == "__main__":

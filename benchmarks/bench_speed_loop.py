@@ -1,0 +1,97 @@
+"""Benchmark of the speed loop's parts built so far (observer, estimator, MPC, closed loop).
+
+Prints:
+* observer speed RMSE at ~2 rad/s through the 10-bit encoder (exact and realistic plant)
+  next to the finite difference (target <= 0.02 rad/s);
+* the closed loop on the Fig. 11 profile (nominal plant, tick switching), with and without
+  the disturbance estimator: steady-state error [%] and NRMSE per reference;
+* MPC decision latency p50/p99 and candidates per decision over that run, the time available
+  before the current actuator switches off at 0.7 m/s, and how many candidates fit in 2 ms.
+
+Run: ``./dev bench`` or ``.venv/bin/python benchmarks/bench_speed_loop.py``.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from hasel_wheel_mpc.closed_loop import run_closed_loop, segment_metrics
+from hasel_wheel_mpc.mpc import Mpc, MpcConfig
+from hasel_wheel_mpc.observer import Observer, ObserverConfig, finite_difference_speed
+from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
+from hasel_wheel_sim.model import SECTOR
+from hasel_wheel_sim.plant import Plant, PlantConfig
+
+D = math.radians
+ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.0, "unit": "rad"}}}
+
+
+def observer_rmse(effects: dict, seconds: float = 40.0) -> tuple[float, float, float]:
+    """(observer RMSE, finite-difference RMSE, mean true speed) over the last 10 s [rad/s]."""
+    p = Plant(config=PlantConfig(seed=1, effects=effects_from_mapping(effects)), xi2=1.0)
+    p.open_loop(D(9), D(22))
+    obs = Observer(config=ObserverConfig(default_phi_a=D(9)))
+    rows = []
+    for _ in range(int(seconds * 300)):
+        s = p.step()
+        if s is not None:
+            rows.append((s.t, p.wheel.s[2], obs.step(s).xi2, s.angle))
+    t, v, e, a = map(np.array, zip(*rows))
+    m = t > seconds - 10
+    fd = finite_difference_speed(t, a)
+    return (float(np.sqrt(np.mean((e[m] - v[m]) ** 2))),
+            float(np.sqrt(np.mean((fd[m] - v[m]) ** 2))), float(np.mean(v[m])))
+
+
+def candidates_in_2ms(w: float) -> tuple[float, float]:
+    """(seconds per candidate, fixed seconds per decision) at speed w, by a linear fit."""
+    n_list, t_list = [], []
+    for step in (3.0, 1.0, 0.5):
+        cfg = MpcConfig(phi_a=tuple(D(x) for x in np.arange(1.0, 15.01, step)))
+        mpc = Mpc(config=cfg)
+        mpc.decide(SECTOR + D(3), w, 1, D(3), D(22), w)          # compile, warm up
+        best = min(_timed(mpc, w) for _ in range(20))
+        n_list.append(len(mpc.cands))
+        t_list.append(best)
+    slope, intercept = np.polyfit(n_list, t_list, 1)
+    return float(slope), float(intercept)
+
+
+def _timed(mpc: Mpc, w: float) -> float:
+    t0 = time.perf_counter()
+    mpc.decide(SECTOR + D(3), w, 1, D(3), D(22), w)
+    return time.perf_counter() - t0
+
+
+def main() -> None:
+    print("speed loop benchmark (issue: closing the speed loop; targets not met yet)")
+    for name, fx in (("exact plant, 10-bit encoder", ENCODER), ("realistic plant", REALISTIC)):
+        obs, fd, v = observer_rmse(fx)
+        print(f"  observer RMSE at {v:.2f} rad/s, {name:28s}: {obs:.4f} rad/s "
+              f"(finite difference {fd:.3f}; target <= 0.02)")
+    latencies = []
+    for label, gain in (("with estimator", 0.3), ("without estimator", None)):
+        log = run_closed_loop(estimator_gain=gain)
+        rows = segment_metrics(log)
+        print(f"  closed loop, nominal plant, {label}:")
+        for ref, ss, nrmse, settle in rows:
+            print(f"    ref {ref:.1f} rad/s: steady-state error {ss:5.2f} %  NRMSE {nrmse:.3f}  "
+                  f"settle (2 %) {settle:5.2f} s   (targets 0.5 %, 0.04)")
+        latencies += [d.compute_time for _, d in log.decisions if not d.braking]
+        cands = [d.candidates for _, d in log.decisions if not d.braking]
+    lat = np.array(latencies)
+    w07 = 0.7 / 0.157
+    print(f"  MPC decision latency p50 {np.percentile(lat, 50) * 1e3:.2f} ms, p99 "
+          f"{np.percentile(lat, 99) * 1e3:.2f} ms, {cands[0]} candidates per decision "
+          f"(target p99 <= 2 ms)")
+    per, fixed = candidates_in_2ms(w07)
+    print(f"  at 0.7 m/s ({w07:.2f} rad/s) the actuator is on for {(D(22) - D(1)) / w07 * 1e3:.0f} ms "
+          f"(phi_a 1 deg) to {(D(22) - D(15)) / w07 * 1e3:.0f} ms (15 deg) after a decision; "
+          f"{per * 1e6:.1f} us per candidate + {fixed * 1e6:.0f} us: "
+          f"{max(0, int((2e-3 - fixed) / per))} candidates fit in 2 ms")
+
+
+if __name__ == "__main__":
+    main()
