@@ -83,9 +83,21 @@ def command_msg(c: Command, t: float) -> dict:
 
 def state_msg(t: float, xi1: float, xi2: float, q: int, act_counter: float,
               deact_counter: float, eta_unwrapped: int, disturbance: float = 0.0,
-              xi2_stddev: float = 0.0, quality: float = 1.0) -> dict:
+              xi2_stddev: float = 0.0, quality: float = 1.0,
+              accel_disturbance: float = 0.0) -> dict:
     """hasel_wheel_msgs/msg/HybridStateEstimate as a dict."""
     return {"header": header(t, "wheel"), "xi1": xi1, "xi2": xi2, "q": q,
             "activation_counter": act_counter, "deactivation_counter": deact_counter,
             "eta": eta_unwrapped % 16, "eta_unwrapped": eta_unwrapped,
-            "disturbance": disturbance, "xi2_stddev": xi2_stddev, "quality": quality}
+            "disturbance": disturbance, "accel_disturbance": accel_disturbance,
+            "xi2_stddev": xi2_stddev, "quality": quality}
+
+
+def mpc_status_msg(t: float, c: Command, reference: float, predicted: float, cost: float,
+                   compute_time: float, slack: float, candidates: int, missed: bool,
+                   braking: bool) -> dict:
+    """hasel_wheel_msgs/msg/MpcStatus as a dict (speeds rad/s, times s)."""
+    return {"header": header(t, ""), "command": command_msg(c, t), "reference_speed": reference,
+            "predicted_speed": predicted, "cost": cost, "compute_time": compute_time,
+            "deadline_slack": slack, "candidates_evaluated": candidates,
+            "deadline_missed": missed, "braking": braking}

@@ -1,8 +1,13 @@
 """``hasel_wheel``: the embedded runner's command line (no ROS needed).
 
-``hasel_wheel demo`` (the default) runs the open-loop trials of ``config/demo_open_loop.yaml``
-on the paper's model, once with exact switching and once switching on 300 Hz firmware
-ticks, records everything to an MCAP bag and prints the table next to the paper's Table II.
+``hasel_wheel demo`` (the default) closes the speed loop on a Fig. 11-like profile on the
+plant with realistic effects, records it to an MCAP bag, writes PNG plots and prints the
+metrics next to the paper's, with comparison runs (no estimator, the paper's estimator, a
+finite-difference speed).
+
+``hasel_wheel table2`` runs the open-loop trials of ``config/demo_open_loop.yaml`` on the
+paper's model, once with exact switching and once switching on 300 Hz firmware ticks,
+records everything to an MCAP bag and prints the table next to the paper's Table II.
 """
 from __future__ import annotations
 
@@ -68,22 +73,62 @@ def demo_table(exact: list[TrialResult], tick: list[TrialResult]) -> str:
     return "\n".join(lines)
 
 
+def _fresh_bag_dir(out: Path) -> Path | None:
+    """out/bag, removed if it is an earlier bag of ours; None if it is something else."""
+    bag_dir = out / "bag"
+    if bag_dir.exists():
+        if not (bag_dir / "metadata.yaml").exists():
+            print(f"error: {bag_dir} exists but is not a bag written by this tool; "
+                  f"choose another --out", file=sys.stderr)
+            return None
+        shutil.rmtree(bag_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    return bag_dir
+
+
 def cmd_demo(args: argparse.Namespace) -> int:
+    """Closed-loop demo: run, record, plot, print the metrics beside the paper's."""
+    from .closed_loop_demo import VARIANTS, metrics_table, plot, run_variants
+
+    plant_cfg = dataclasses.replace(load_plant_config(args.plant), switching="tick")
+    if args.hold_scale <= 0.0:
+        print(f"error: --hold-scale {args.hold_scale}: expected a positive factor", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    bag_dir = _fresh_bag_dir(out)
+    if bag_dir is None:
+        return 2
+    rec = Recorder(bag_dir, custom_data={"tool": "hasel_wheel demo", "git_revision": git_revision(),
+                                         "seed": str(plant_cfg.seed),
+                                         "plant.yaml": Path(args.plant).read_text(),
+                                         "hold_scale": repr(args.hold_scale)})
+    variants = VARIANTS if args.compare else VARIANTS[:1]
+    t0 = time.perf_counter()
+    try:
+        results = run_variants(plant_cfg, args.hold_scale, variants, rec)
+    finally:
+        rec.close()
+    wall = time.perf_counter() - t0
+    print(metrics_table(results))
+    pngs = plot(results, out)
+    sim = results[0].log.t[-1] * len(results)
+    print(f"Plots: {', '.join(str(p) for p in pngs)}")
+    print(f"Bag: {bag_dir} ({rec.bag.metadata()['rosbag2_bagfile_information']['message_count']}"
+          f" messages, first run). {sim:.0f} s simulated in {wall:.1f} s wall.")
+    return 0
+
+
+def cmd_table2(args: argparse.Namespace) -> int:
     """Run the open-loop demo, write the bag, print the table."""
     params = load_wheel_params(args.wheel_params)
     plant_cfg = load_plant_config(args.plant)
     trials = trials_from_mapping(load_yaml_file(args.trials).get("open_loop"),
                                  f"{args.trials}: open_loop")
     out = Path(args.out)
-    bag_dir = out / "bag"
-    if bag_dir.exists():
-        if not (bag_dir / "metadata.yaml").exists():
-            print(f"error: {bag_dir} exists but is not a bag written by this tool; "
-                  f"choose another --out", file=sys.stderr)
-            return 2
-        shutil.rmtree(bag_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    custom = {"tool": "hasel_wheel demo", "git_revision": git_revision(),
+    bag_dir = _fresh_bag_dir(out)
+    if bag_dir is None:
+        return 2
+    custom = {"tool": "hasel_wheel table2", "git_revision": git_revision(),
               "seed": str(plant_cfg.seed),
               "wheel_params.yaml": Path(args.wheel_params).read_text(),
               "plant.yaml": Path(args.plant).read_text(),
@@ -189,12 +234,20 @@ def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="hasel_wheel", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="command")
-    d = sub.add_parser("demo", help="open-loop trials vs. paper Table II, recorded to a bag")
-    d.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
+    c = sub.add_parser("demo", help="closed speed loop vs. paper Fig. 11, recorded to a bag")
+    c.add_argument("--out", default="out/demo", help="output directory (default: out/demo)")
+    c.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant_realistic.yaml")))
+    c.add_argument("--hold-scale", type=float, default=1.0,
+                   help="stretch every hold of the profile by this factor (default 1: 40 s holds)")
+    c.add_argument("--no-compare", dest="compare", action="store_false",
+                   help="skip the comparison runs (no estimator, paper estimator, finite difference)")
+    c.set_defaults(func=cmd_demo)
+    d = sub.add_parser("table2", help="open-loop trials vs. paper Table II, recorded to a bag")
+    d.add_argument("--out", default="out/table2", help="output directory (default: out/table2)")
     d.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
     d.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant.yaml")))
     d.add_argument("--trials", default=str(packaged("hasel_wheel_mpc", "demo_open_loop.yaml")))
-    d.set_defaults(func=cmd_demo)
+    d.set_defaults(func=cmd_table2)
     r = sub.add_parser("link-run", help="host stack over a real pty against the virtual Teensy")
     r.add_argument("--out", default="out/link_run")
     r.add_argument("--seconds", type=float, default=60.0, help="simulated seconds")

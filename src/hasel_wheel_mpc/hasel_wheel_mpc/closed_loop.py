@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -50,15 +51,23 @@ class LoopLog:
 
 def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
                     plant_config: PlantConfig | None = None, params: WheelParams | None = None,
-                    estimator_gain: float | None = 0.3, speed_source: str = "observer",
-                    mpc_config: MpcConfig | None = None, w0: float = 1.0) -> LoopLog:
-    """Run the loop; ``estimator_gain`` None disables the disturbance estimator;
-    ``speed_source`` 'observer' or 'finite_difference' (what the MPC sees as xi2)."""
+                    estimator_gain: float | None = 0.1, speed_source: str = "observer",
+                    mpc_config: MpcConfig | None = None, w0: float = 1.0,
+                    estimator_mode: str = "tracking", observer_config=None,
+                    recorder=None, ns: str = "/wheel0") -> LoopLog:
+    """Run the loop on ``profile`` ((start [s], reference [rad/s]), ...) for ``duration`` [s].
+
+    ``estimator_gain`` None disables the disturbance estimator (``estimator_mode`` 'tracking'
+    or 'paper'); ``speed_source`` 'observer' or 'finite_difference' (what the MPC sees as xi2;
+    with the finite difference the observer's disturbance is not used either).  With a
+    ``recorder`` (recorder.Recorder) every sample, estimate, decision and reference change is
+    written under namespace ``ns``.
+    """
     params = params or WheelParams()
     plant = Plant(params, plant_config or PlantConfig(switching="tick"), xi2=w0)
-    obs = Observer(params)
+    obs = Observer(params, config=observer_config)
     mpc = Mpc(params, config=mpc_config)
-    est = IntegralEstimator(gain=estimator_gain) if estimator_gain else None
+    est = IntegralEstimator(gain=estimator_gain, mode=estimator_mode) if estimator_gain else None
     log = LoopLog()
     pending: Command | None = Command(1, D(3), D(22), 0)       # start the wheel
     obs.command_sent(0, D(3), D(22))
@@ -71,12 +80,17 @@ def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
     window_pred: float | None = None
     prev_angle = prev_t = None
     fd = 0.0
+    last_ref = reference_at(profile, 0.0)
     for _ in range(int(duration / TICK)):
         s = plant.step(pending)
         pending = None
         if s is None:
             continue
         e = obs.step(s)
+        if recorder is not None:
+            recorder.telemetry(ns, s)
+            recorder.true_state(ns, plant.t, plant.wheel.state)
+            recorder.estimate(ns, e, est.d if est else 0.0)
         if prev_angle is not None and s.t > prev_t:
             fd = (s.angle - prev_angle) / (s.t - prev_t)
         prev_angle, prev_t = s.angle, s.t
@@ -100,36 +114,58 @@ def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
                 d = est.d
             window_pred = queued.pop(0) if queued else None
             cycle_speeds = [speed]
-        if switched_on or idle == 150:
+        # a new reference while the current actuator is on: decide again at once (the waiting
+        # command is replaced before it latches at the switch-off), so a step is met a cycle early
+        # (only with time to spare before the switch-off: 20 ms; otherwise the next one decides)
+        redecide = (ref != last_ref and s.q == 1 and not switched_on
+                    and e.deact_counter > 0.02 * max(speed, 0.1))
+        if recorder is not None and (ref != last_ref or not log.t[:-1]):
+            recorder.reference(ns, s.t, ref)
+        last_ref = ref
+        if switched_on or idle == 150 or redecide:
             pa_now, pd_now = angles.get(s.last_command_sequence, latched)
-            dec = mpc.decide(e.xi1, speed, s.eta_unwrapped, pa_now, pd_now, ref, d)
+            dec = mpc.decide(e.xi1, speed, s.eta_unwrapped, pa_now, pd_now, ref, d,
+                             e.accel_coefficients if speed_source == "observer" else (0.0, 0.0, 0.0))
             if not switched_on:      # idle wheel: the next pad from the measured sector
                 n_a = (int(math.floor(e.xi1 / (math.pi / 8))) + 1) % 16
                 dec = dec._replace(command=dec.command._replace(n_a=n_a))
             pending = dec.command
             angles[dec.command.sequence] = (dec.command.phi_a, dec.command.phi_d)
             obs.command_sent(dec.command.sequence, dec.command.phi_a, dec.command.phi_d)
-            if not dec.braking:
-                queued.append(dec.predicted_speed - d)   # model-only mean over its cycle
+            prediction = None if dec.braking else dec.predicted_speed - d   # model-only mean
+            if redecide and queued:
+                queued[-1] = prediction
             else:
-                queued.append(None)
+                queued.append(prediction)
             log.decisions.append((s.t, dec))
+            if recorder is not None:
+                recorder.decision(ns, s.t, dec, ref)
             idle = 0
     return log
 
 
-def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
-                    window: float = 10.0):
-    """Per reference segment: steady-state error [%], NRMSE [1], rise/fall time [s].
+class SegmentMetrics(NamedTuple):
+    reference: float       # [rad/s]
+    steady_error: float    # |mean(speed) - ref| / ref over the steady window [%]
+    nrmse: float           # RMSE(speed - ref) / ref over the steady window [1]
+    transition: float      # from the step until the speed first reaches ref [s] (rise/fall)
+    settle: float          # from the step until the speed first comes within 2 % of ref [s]
 
-    Steady window: the last ``window`` seconds of the segment, on the true speed.
-    NRMSE = RMSE(true - ref) / ref over that window.  Rise (fall) time: from the segment's
-    start until the speed first comes within 2 % of the new reference.
+
+def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
+                    window: float = 10.0) -> list[SegmentMetrics]:
+    """Per reference segment, on the true speed (see :class:`SegmentMetrics`).
+
+    Steady window: the last ``window`` seconds of the segment.  The transition time is the
+    rise time of a step up and the fall time of a step down, measured as the braking
+    calibration does (from the step until the new reference is first reached); NaN for the
+    first segment (no step).
     """
     a = log.arrays()
     t, v = a["t"], a["true_speed"]
     out = []
     bounds = [p[0] for p in profile] + [duration]
+    prev = None
     for (t0, ref), t1 in zip(profile, bounds[1:]):
         seg = (t >= t0) & (t < t1)
         steady = seg & (t >= t1 - window)
@@ -137,5 +173,10 @@ def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11
         nrmse = float(np.sqrt(np.mean((v[steady] - ref) ** 2))) / ref
         inside = np.flatnonzero(seg & (np.abs(v - ref) <= 0.02 * ref))
         settle = float(t[inside[0]] - t0) if inside.size else math.nan
-        out.append((ref, ss, nrmse, settle))
+        trans = math.nan
+        if prev is not None and prev != ref:
+            hit = np.flatnonzero(seg & ((v >= ref) if ref > prev else (v <= ref)))
+            trans = float(t[hit[0]] - t0) if hit.size else math.nan
+        out.append(SegmentMetrics(ref, float(ss), nrmse, trans, settle))
+        prev = ref
     return out

@@ -1,22 +1,33 @@
 """Model predictive speed control (paper Sec. V) on the hybrid model, without ROS.
 
-At each switch-on of the current actuator (the paper's decision point), the controller
-chooses u = (n_a, phi_a, phi_d) for the next pad.  It predicts every candidate over the next
-activation-deactivation cycle with the hybrid model, all candidates at once in one compiled
-batch.  The prediction switches on 300 Hz ticks, as the firmware does, and the candidate is
-latched when the current actuator switches off.
+At each switch-on of the current actuator (the paper's decision point) the controller chooses
+u = (n_a, phi_a, phi_d) for the next pad.  It predicts every candidate over the next
+activation-deactivation cycle with the hybrid model (compiled, 300 Hz firmware ticks, the
+candidate latched at the current switch-off) and keeps the cheapest.
+
+Search (beyond the paper's 15 phi_a at phi_d = 22 deg): a coarse pass over ``phi_a`` x ``phi_d``
+(by default exactly the paper's 15 candidates), then a joint, finer pass around the best:
+phi_a + ``refine_phi_a`` offsets x ``refine_phi_d``.
 
 Cost (59), as we read it: the next cycle has two flow segments, q = 0 (waiting for the
 candidate's switch-on) and q = 1 (the candidate on, until it switches off).  Each segment's
 squared speed error is averaged over its samples, and J = 1/2 (mean_0 + mean_1).  The speed
-before the current actuator switches off is the same for every candidate, so it is not part
-of J.  The disturbance estimate enters as a speed offset: xi2_prdt = xi2_model + d.
+before the current switch-off is the same for every candidate, so it is not part of J.
+Two additions of ours, both switchable: ``time_weighted`` (the mean over all the cycle's
+samples, i.e. the NRMSE we are judged on) and a terminal term w_T (xi2_end - xi2_r)^2.
 
-Our addition: a terminal term w_T (xi2_end + d - xi2_r)^2 (``terminal_weight``; 0 = (59) alone),
-see :func:`costs_59`.
+Disturbances enter the prediction twice: the estimator's speed offset d [rad/s] is added to
+the predicted speed, and the observer's acceleration disturbance a_d(xi1) [rad/s^2] is added
+to the model's acceleration (see observer.py and disturbance.py).
 
 Braking (Sec. V-A): when the estimated speed is at least ``brake_threshold`` [rad/s] above the
 reference, u = braking_input (n_a = eta + 2, -22 deg, -6 deg); no search.
+
+Deadline: the decision must be ready ``deadline_margin`` [s] (the command's way to the wheel)
+before the current actuator switches off, as the prediction times it.  A later decision is
+discarded and the fallback is sent instead: the last driving (phi_a, phi_d) again for the next
+pad (the paper's phi_d = 22 deg and the middle of phi_a if there is none), which keeps the
+wheel rolling as it was.  Every miss is counted (``Mpc.deadline_misses``).
 """
 from __future__ import annotations
 
@@ -29,39 +40,69 @@ import numpy as np
 
 from hasel_wheel_driver.samples import Command
 from hasel_wheel_sim import layout as L
-from hasel_wheel_sim.integrator import simulate_batch
+from hasel_wheel_sim.integrator import advance
 from hasel_wheel_sim.jit import jit
 from hasel_wheel_sim.model import SECTOR, Extensions, braking_input, param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.wheel import TICK, initial_state
+
+from .observer import set_disturbance
 
 D = math.radians
 
 
 @dataclass(frozen=True)
 class MpcConfig:
-    """Search space and modes (angles rad, speeds rad/s)."""
+    """Search space, cost and modes (angles rad, speeds rad/s, times s)."""
 
-    phi_a: tuple[float, ...] = tuple(D(x) for x in np.arange(1.0, 15.01, 0.5))
-    phi_d: tuple[float, ...] = tuple(D(x) for x in (16.0, 18.0, 20.0, 22.0))
-    brake_threshold: float = 0.3
+    phi_a: tuple[float, ...] = tuple(D(x) for x in range(1, 16))      # coarse pass
+    phi_d: tuple[float, ...] = (D(22.0),)
+    refine_phi_a: tuple[float, ...] = tuple(D(x) for x in (-0.75, -0.5, -0.25, 0.0, 0.25, 0.5, 0.75))
+    refine_phi_d: tuple[float, ...] = tuple(D(x) for x in (20.0, 21.0, 22.0))
+    brake_threshold: float = 0.3       # [rad/s] above the reference
     brake_phi_a: float = D(-22.0)
     brake_phi_d: float = D(-6.0)
     max_horizon: float = 4.0           # longest prediction [s] (slow wheels)
-    terminal_weight: float = 1.0       # w_T of our terminal term; 0 gives (59) exactly [1]
+    terminal_weight: float = 1.0       # w_T of our terminal term [1]; 0 = none
+    time_weighted: bool = True         # mean over all the cycle's samples; False = (59) exactly
+    deadline_margin: float = 0.004     # the command's way to the wheel [s]
+
+    def __post_init__(self) -> None:
+        for name in ("phi_a", "phi_d", "refine_phi_d"):
+            bad = [x for x in getattr(self, name) if not 0.0 < x < SECTOR]
+            if bad:
+                raise ValueError(f"{name} = {bad} rad: driving angles must lie in (0, pi/8)")
+        if not (math.isfinite(self.brake_threshold) and self.brake_threshold > 0.0):
+            raise ValueError(f"brake_threshold = {self.brake_threshold!r} rad/s: expected > 0")
+        if not (-SECTOR < self.brake_phi_a < self.brake_phi_d < 0.0):
+            raise ValueError("braking angles: expected -pi/8 < brake_phi_a < brake_phi_d < 0 rad")
+        if self.terminal_weight < 0.0 or self.deadline_margin < 0.0 or self.max_horizon <= 0.0:
+            raise ValueError("terminal_weight and deadline_margin must be >= 0, max_horizon > 0")
 
     def candidates(self) -> np.ndarray:
-        """(n, 2) array of (phi_a, phi_d) with phi_a < phi_d."""
-        return np.array([(a, d) for d in self.phi_d for a in self.phi_a if a < d])
+        """(n, 2) array of the coarse pass's (phi_a, phi_d) [rad] with phi_a < phi_d."""
+        return _pairs(self.phi_a, self.phi_d)
+
+    def refinement(self, phi_a: float) -> np.ndarray:
+        """(m, 2) array of the fine pass around a coarse winner ``phi_a`` [rad]."""
+        return _pairs([phi_a + o for o in self.refine_phi_a if 0.0 < phi_a + o < SECTOR],
+                      self.refine_phi_d)
+
+
+def _pairs(phi_a, phi_d) -> np.ndarray:
+    rows = [(a, d) for d in phi_d for a in phi_a if a < d]
+    return np.array(rows, dtype=float).reshape(-1, 2)
 
 
 class Decision(NamedTuple):
     command: Command
     predicted_speed: float   # mean predicted speed over the candidate's cycle [rad/s] (with d)
-    cost: float              # J of (59) [(rad/s)^2]
-    candidates: int
-    compute_time: float      # [s]
+    cost: float              # J [(rad/s)^2]
+    candidates: int          # candidates predicted [count]
+    compute_time: float      # wall time spent deciding [s]
     braking: bool
+    deadline_slack: float = math.nan   # time to the current switch-off - margin - compute [s]
+    deadline_missed: bool = False      # True: the fallback was sent instead
 
 
 def cost_59(speed: np.ndarray, q: np.ndarray, reference: float, d: float = 0.0) -> float:
@@ -88,16 +129,6 @@ def cost_59(speed: np.ndarray, q: np.ndarray, reference: float, d: float = 0.0) 
     c = off_after[0]
     e = speed + d - reference
     return 0.5 * (float(np.mean(e[a:b] ** 2)) + float(np.mean(e[b:c] ** 2)))
-
-
-def cycle_mean(speed: np.ndarray, q: np.ndarray) -> float:
-    """Mean speed over the next cycle: from the current switch-off to the candidate's
-    switch-off (the window (59) judges); the whole horizon if it holds no full cycle."""
-    qi = q.astype(np.int8)
-    offs = np.flatnonzero((qi[:-1] == 1) & (qi[1:] == 0)) + 1
-    if offs.size >= 2:
-        return float(np.mean(speed[offs[0]:offs[1]]))
-    return float(np.mean(speed))
 
 
 @jit
@@ -141,29 +172,121 @@ def costs_59(out: np.ndarray, reference: float, d: float, costs: np.ndarray,
         costs[i] = 0.5 * (s0 / (b - a) + s1 / (c - b)) + terminal_weight * end * end
 
 
+@jit
+def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: float,
+                        max_ticks: int, reference: float, d: float, terminal_weight: float,
+                        time_weighted: bool, costs: np.ndarray, means: np.ndarray) -> int:
+    """Predict every candidate over the next cycle and cost it, sharing the common prefix.
+
+    ``s0`` (S_SIZE,) is the wheel with the current actuator on; ``cands`` (n, 2) hold
+    (phi_a, phi_d) [rad] for the next pad.  Every candidate's trajectory is identical until
+    the current actuator switches off, so that prefix is simulated once; each candidate then
+    runs from the start of that tick until its own switch-off and stops.  The samples and
+    the cost are those of :func:`costs_59` on the full-horizon simulation (same ticks, same
+    arithmetic), with ``time_weighted`` replacing the mean of the two segment means by the
+    mean over all samples of the cycle.  Writes ``costs`` (n,) [(rad/s)^2] (inf when the
+    cycle does not finish within ``max_ticks``) and ``means`` (n,), the model's mean speed
+    over the cycle [rad/s] (d not added).  Returns the prefix length in ticks (the time left
+    before the current switch-off, in units of h), or -1 if it does not switch off in time.
+    """
+    ev = np.zeros((L.EV_MAX_PER_TICK, 4))
+    s = s0.copy()
+    pre = s0.copy()
+    k = 0
+    while k < max_ticks:
+        pre[:] = s
+        advance(s, pv, h, ev)
+        k += 1
+        if s[L.S_Q] == 0.0:
+            break
+    if s[L.S_Q] != 0.0:
+        costs[:] = math.inf
+        means[:] = math.nan
+        return -1
+    left = max_ticks - k + 1
+    w = np.empty_like(pre)
+    for i in range(cands.shape[0]):
+        w[:] = pre
+        w[L.S_PEND_PHI_A] = cands[i, 0]
+        w[L.S_PEND_PHI_D] = cands[i, 1]
+        seg = 0
+        n0 = 0
+        n1 = 0
+        sum0 = 0.0
+        sum1 = 0.0
+        vsum = 0.0
+        last = 0.0
+        done = False
+        for _ in range(left):
+            advance(w, pv, h, ev)
+            q = w[L.S_Q]
+            if seg == 0 and q != 0.0:
+                seg = 1
+            elif seg == 1 and q == 0.0:
+                done = True
+                break
+            e = w[L.S_XI2] + d - reference
+            if seg == 0:
+                sum0 += e * e
+                n0 += 1
+            else:
+                sum1 += e * e
+                n1 += 1
+            vsum += w[L.S_XI2]
+            last = e
+        if not done:
+            costs[i] = math.inf
+            means[i] = math.nan
+            continue
+        if time_weighted or n0 == 0:
+            j = (sum0 + sum1) / (n0 + n1)
+        else:
+            j = 0.5 * (sum0 / n0 + sum1 / n1)
+        costs[i] = j + terminal_weight * last * last
+        means[i] = vsum / (n0 + n1)
+    return k
+
+
 class Mpc:
-    """``decide(xi1, xi2, eta_unwrapped, phi_a_now, phi_d_now, reference, d) -> Decision``."""
+    """``decide(xi1, xi2, eta_unwrapped, phi_a_now, phi_d_now, reference, d, disturbance)``.
+
+    ``clock`` returns seconds (wall time by default; tests pass a fake one).
+    """
 
     def __init__(self, params: WheelParams | None = None, extensions: Extensions | None = None,
-                 config: MpcConfig | None = None) -> None:
+                 config: MpcConfig | None = None, clock=time.perf_counter) -> None:
         self.config = config or MpcConfig()
         self.cands = self.config.candidates()
         self.pv = param_vector(params or WheelParams(), extensions)
-        n = len(self.cands)
-        self._pvs = np.tile(self.pv, (n, 1))
         self._base = initial_state(mode="tick")
+        self.clock = clock
         self.seq = 0
+        self.decisions = 0
+        self.deadline_misses = 0
+        mid = self.config.phi_a[len(self.config.phi_a) // 2]
+        self.last_drive = (mid, max(self.config.phi_d))
+        # load the compiled predictor now, so the first real decision is not the slow one
+        self._costs(initial_state(mode="tick"), self.pv, self.cands[:1], 2, 1.0, 0.0)
 
     def decide(self, xi1: float, xi2: float, eta_unwrapped: int, phi_a_now: float,
-               phi_d_now: float, reference: float, d: float = 0.0) -> Decision:
-        """Choose u for the pad after ``eta_unwrapped`` (the actuator that just switched on)."""
-        t0 = time.perf_counter()
+               phi_d_now: float, reference: float, d: float = 0.0,
+               disturbance: tuple = (0.0, 0.0, 0.0)) -> Decision:
+        """Choose u for the pad after ``eta_unwrapped`` (the actuator that just switched on).
+
+        xi1 [rad] unwrapped, xi2 [rad/s], (phi_a_now, phi_d_now) [rad] of the current pad,
+        reference [rad/s]; ``d`` [rad/s] is added to the predicted speed; ``disturbance``
+        (c, a, b) [rad/s^2], the observer's a_d(xi1) = c + a cos xi1 + b sin xi1, is added to
+        the model's acceleration over the whole prediction.
+        """
+        t0 = self.clock()
         self.seq += 1
+        self.decisions += 1
         if xi2 + d >= reference + self.config.brake_threshold:
             n_a, pa, pd = braking_input(xi1, self.config.brake_phi_a, self.config.brake_phi_d)
-            cmd = Command(n_a, pa, pd, self.seq)
-            return Decision(cmd, xi2 + d, math.nan, 0, time.perf_counter() - t0, True)
-        n = len(self.cands)
+            left = (eta_unwrapped * SECTOR + phi_d_now - xi1) / max(xi2, 1e-3)
+            dt = self.clock() - t0
+            return Decision(Command(n_a, pa, pd, self.seq), xi2 + d, math.nan, 0, dt, True,
+                            left - self.config.deadline_margin - dt, False)
         s = self._base.copy()
         s[L.S_XI1] = xi1
         s[L.S_XI2] = xi2
@@ -176,21 +299,43 @@ class Mpc:
         s[L.S_THETA_OFF] = eta_unwrapped * SECTOR + phi_d_now
         s[L.S_PEND] = 1.0
         s[L.S_PEND_NA] = float((eta_unwrapped + 1) % 16)
-        states = np.tile(s, (n, 1))
-        states[:, L.S_PEND_PHI_A] = self.cands[:, 0]
-        states[:, L.S_PEND_PHI_D] = self.cands[:, 1]
-        # long enough for ~2.3 sectors at the current speed (the rest of this pad + the next)
-        horizon = min(self.config.max_horizon, 2.3 * SECTOR / max(xi2, 0.3))
+        pv = set_disturbance(self.pv.copy(), self.pv, disturbance)
+        # long enough for the rest of this pad and the whole next one at the current speed
+        horizon = min(self.config.max_horizon, 2.5 * SECTOR / max(xi2, 0.3))
         n_ticks = max(int(horizon / TICK), 10)
-        out = np.empty((n, n_ticks, 3))
-        simulate_batch(states, self._pvs, TICK, n_ticks, out)
-        costs = np.empty(n)
-        costs_59(out, reference, d, costs, self.config.terminal_weight)
+        cfg = self.config
+        cands = self.cands
+        costs, means, prefix = self._costs(s, pv, cands, n_ticks, reference, d)
+        n = len(cands)
         if np.isfinite(costs).any():
+            fine = cfg.refinement(cands[int(np.argmin(costs)), 0])
+            if len(fine):
+                c2, m2, _ = self._costs(s, pv, fine, n_ticks, reference, d)
+                cands = np.vstack([cands, fine])
+                costs = np.concatenate([costs, c2])
+                means = np.concatenate([means, m2])
+                n += len(fine)
             best = int(np.argmin(costs))
         else:   # no candidate completes its cycle within the horizon: push as hard as we can
-            best = int(np.lexsort((self.cands[:, 0], -self.cands[:, 1]))[0])
-        pa, pd = self.cands[best]
-        cmd = Command((eta_unwrapped + 1) % 16, float(pa), float(pd), self.seq)
-        return Decision(cmd, cycle_mean(out[best, :, 1], out[best, :, 2]) + d,
-                        float(costs[best]), n, time.perf_counter() - t0, False)
+            best = int(np.lexsort((cands[:, 0], -cands[:, 1]))[0])
+        pa, pd = (float(x) for x in cands[best])
+        dt = self.clock() - t0
+        left = prefix * TICK if prefix > 0 else horizon    # no switch-off in sight
+        slack = left - cfg.deadline_margin - dt
+        missed = slack < 0.0
+        if missed:      # too late to matter: keep the wheel rolling as it was
+            self.deadline_misses += 1
+            pa, pd = self.last_drive
+        else:
+            self.last_drive = (pa, pd)
+        cmd = Command((eta_unwrapped + 1) % 16, pa, pd, self.seq)
+        return Decision(cmd, float(means[best]) + d, float(costs[best]), n, dt, False, slack,
+                        missed)
+
+    def _costs(self, s, pv, cands, n_ticks, reference, d):
+        costs = np.empty(len(cands))
+        means = np.empty(len(cands))
+        prefix = predict_cycle_costs(s, pv, cands, TICK, n_ticks, reference, d,
+                                     self.config.terminal_weight, self.config.time_weighted,
+                                     costs, means)
+        return costs, means, prefix

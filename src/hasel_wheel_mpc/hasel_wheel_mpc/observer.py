@@ -45,7 +45,10 @@ class ObserverConfig:
     default_phi_a: float = math.radians(3.0)   # phi_a when the latched command is unknown [rad]
     default_phi_d: float = math.radians(22.0)  # phi_d likewise [rad]
     initial_speed_std: float = 2.0  # std of the first speed guess [rad/s]
+    initial_disturbance_std: float = 0.2  # std of the first guess of c, a, b [rad/s^2]
     window: int = 300               # samples over which the quality is judged [1]
+    disturbance_rate: float = 0.05  # random-walk intensity of each disturbance coefficient
+                                    # (c, a, b) [rad/s^2 per sqrt(s)]; 0 = no disturbance state
 
 
 class Estimate(NamedTuple):
@@ -58,13 +61,23 @@ class Estimate(NamedTuple):
     act_counter: float
     deact_counter: float
     eta_unwrapped: int
-    disturbance: float
+    disturbance: float       # speed offset d_hat of the disturbance estimator [rad/s] (0 here)
     xi2_std: float
     quality: float
+    accel_disturbance: float = 0.0      # a_d at xi1: unmodelled acceleration [rad/s^2]
+    accel_disturbance_std: float = 0.0  # one-sigma uncertainty of its constant part [rad/s^2]
+    accel_coefficients: tuple = (0.0, 0.0, 0.0)   # (c, a, b) of a_d [rad/s^2]
 
 
 class Observer:
-    """EKF on (xi1, xi2) with the hybrid model as its process model."""
+    """EKF on (xi1, xi2, c, a, b) with the hybrid model as its process model.
+
+    a_d(xi1) = c + a cos(xi1) + b sin(xi1) [rad/s^2] is the acceleration the model does not
+    explain: a constant part (charge retention, drag, a platform pulling) and a once-per-turn
+    part (an off-centre mass; the paper trims its wheel's COM with weights for this reason).
+    c, a, b are slow random walks.  a_d is added to the model's acceleration in the
+    prediction, and the MPC predicts with it too.
+    """
 
     def __init__(self, params: WheelParams | None = None, extensions: Extensions | None = None,
                  config: ObserverConfig | None = None) -> None:
@@ -73,8 +86,9 @@ class Observer:
         self.pv = param_vector(self.params, extensions)
         self._s = initial_state()          # scratch state for the flow: q, eta, phi_a, on-time
         self._commands: dict[int, tuple[float, float]] = {}
-        self.x: np.ndarray | None = None    # (xi1, xi2)
-        self.P = np.zeros((2, 2))
+        self.x: np.ndarray | None = None    # (xi1 [rad], xi2 [rad/s], c, a, b [rad/s^2])
+        self.P = np.zeros((5, 5))
+        self._pv = self.pv.copy()           # the model with the current a_d as a torque
         self.t = 0.0
         self.on_since = 0.0
         self.rejected = 0
@@ -90,7 +104,8 @@ class Observer:
         return self._commands.get(seq, (self.config.default_phi_a, self.config.default_phi_d))
 
     def _flow(self, x: np.ndarray, dt: float, s: np.ndarray) -> tuple[float, float]:
-        return rk4(float(x[0]), float(x[1]), dt, s, 1.0, self.pv)
+        set_disturbance(self._pv, self.pv, x[2:5])
+        return rk4(float(x[0]), float(x[1]), dt, s, 1.0, self._pv)
 
     def step(self, z: TelemetrySample) -> Estimate:
         """Fold in one telemetry sample; return the estimate at its time."""
@@ -98,8 +113,9 @@ class Observer:
         r = (COUNT * COUNT) / 12.0 + c.encoder_noise ** 2
         meas = z.angle + 0.5 * COUNT           # middle of the count the encoder floored into
         if self.x is None:
-            self.x = np.array([meas, 0.0])
-            self.P = np.diag([r, c.initial_speed_std ** 2])
+            self.x = np.array([meas, 0.0, 0.0, 0.0, 0.0])
+            a_var = c.initial_disturbance_std ** 2 if c.disturbance_rate > 0.0 else 0.0
+            self.P = np.diag([r, c.initial_speed_std ** 2, a_var, a_var, a_var])
             self.t = z.t
             self._prev = z
             return self._estimate(z)
@@ -117,7 +133,10 @@ class Observer:
         else:
             k = h_p / s_inn
             self.x = self.x + k * nu
-            self.P = self.P - np.outer(k, h_p)
+            # Joseph form: keeps P symmetric positive definite with the tiny encoder variance
+            a = np.eye(len(k))
+            a[:, 0] -= k
+            self.P = a @ self.P @ a.T + r * np.outer(k, k)
             self.updates += 1
         self.t = z.t
         if z.q and not (self._prev and self._prev.q):
@@ -136,15 +155,27 @@ class Observer:
         x1, v1 = self._flow(x, dt, s)
         # Jacobian of the flow by central differences (the flow is smooth within a mode)
         e1, e2 = 1e-6, 1e-6
-        a = self._flow(x + (e1, 0.0), dt, s)
-        b = self._flow(x - (e1, 0.0), dt, s)
-        cc = self._flow(x + (0.0, e2), dt, s)
-        d = self._flow(x - (0.0, e2), dt, s)
-        F = np.array([[(a[0] - b[0]) / (2 * e1), (cc[0] - d[0]) / (2 * e2)],
-                      [(a[1] - b[1]) / (2 * e1), (cc[1] - d[1]) / (2 * e2)]])
+        z3 = (0.0, 0.0, 0.0)
+        a = self._flow(x + (e1, 0.0, *z3), dt, s)
+        b = self._flow(x - (e1, 0.0, *z3), dt, s)
+        cc = self._flow(x + (0.0, e2, *z3), dt, s)
+        d = self._flow(x - (0.0, e2, *z3), dt, s)
+        F = np.eye(5)
+        F[0, 0] = (a[0] - b[0]) / (2 * e1)
+        F[0, 1] = (cc[0] - d[0]) / (2 * e2)
+        F[1, 0] = (a[1] - b[1]) / (2 * e1)
+        F[1, 1] = (cc[1] - d[1]) / (2 * e2)
+        # a_d enters as an added acceleration: d/d(c, a, b) = (dt^2/2, dt) x (1, cos, sin)
+        basis = (1.0, math.cos(x[0]), math.sin(x[0]))
+        for j in range(3):
+            F[0, 2 + j] = dt * dt / 2.0 * basis[j]
+            F[1, 2 + j] = dt * basis[j]
         qa = self.config.accel_noise ** 2
-        Q = qa * np.array([[dt ** 3 / 3.0, dt ** 2 / 2.0], [dt ** 2 / 2.0, dt]])
-        self.x = np.array([x1, v1])
+        Q = np.zeros((5, 5))
+        Q[:2, :2] = qa * np.array([[dt ** 3 / 3.0, dt ** 2 / 2.0], [dt ** 2 / 2.0, dt]])
+        if self.config.disturbance_rate > 0.0:
+            Q[2:, 2:] = self.config.disturbance_rate ** 2 * dt * np.eye(3)
+        self.x = np.array([x1, v1, x[2], x[3], x[4]])
         self.P = F @ self.P @ F.T + Q
 
     def _estimate(self, z: TelemetrySample) -> Estimate:
@@ -156,7 +187,28 @@ class Observer:
         bad = sum(self._recent) / max(len(self._recent), 1)
         quality = max(0.0, 1.0 - 5.0 * bad)
         return Estimate(z.t, xi1, float(self.x[1]), z.q, act, deact, z.eta_unwrapped, 0.0,
-                        float(math.sqrt(max(self.P[1, 1], 0.0))), quality)
+                        float(math.sqrt(max(self.P[1, 1], 0.0))), quality,
+                        disturbance_at(self.x[2:5], xi1),
+                        float(math.sqrt(max(self.P[2, 2], 0.0))),
+                        tuple(float(v) for v in self.x[2:5]))
+
+
+def disturbance_at(coefficients, xi1: float) -> float:
+    """a_d(xi1) = c + a cos(xi1) + b sin(xi1) [rad/s^2] for coefficients (c, a, b)."""
+    c, a, b = coefficients
+    return float(c + a * math.cos(xi1) + b * math.sin(xi1))
+
+
+def set_disturbance(pv: np.ndarray, base: np.ndarray, coefficients) -> np.ndarray:
+    """Write the acceleration disturbance (c, a, b) [rad/s^2] into ``pv`` as torques [N*m].
+
+    ``base`` is the model's own parameter vector (its inertia converts); returns ``pv``.
+    """
+    inertia = 1.0 / base[L.P_INV_INERTIA]
+    pv[L.P_BIAS_TORQUE] = coefficients[0] * inertia
+    pv[L.P_BIAS_COS] = coefficients[1] * inertia
+    pv[L.P_BIAS_SIN] = coefficients[2] * inertia
+    return pv
 
 
 def finite_difference_speed(t: np.ndarray, angle: np.ndarray) -> np.ndarray:

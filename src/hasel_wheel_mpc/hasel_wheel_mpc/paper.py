@@ -36,3 +36,13 @@ def table_ii_rise(phi_a_deg: int) -> float | None:
     """Measured rise time [s] of Table II at phi_d = 22 deg, or None."""
     row = TABLE_II_PHI_D22.get(phi_a_deg)
     return None if row is None else row[0]
+
+
+#: Fig. 11 / Sec. V-C: reference [rad/s] -> (steady-state error [%], NRMSE [1]) without and
+#: with the disturbance estimator.
+FIG11_WITHOUT_ESTIMATOR = {1.0: (9.80, 0.133), 1.5: (7.82, 0.098), 2.0: (5.37, 0.067),
+                           2.5: (None, 0.039)}
+FIG11_WITH_ESTIMATOR = {1.0: (0.80, 0.090), 1.5: (0.96, 0.053), 2.0: (0.52, 0.046),
+                        2.5: (None, 0.042)}
+#: Fig. 11(c): braking fall time 2.6 -> 2.0 rad/s [s].
+FIG11_FALL_TIME = 1.2

@@ -30,17 +30,17 @@ def git_revision(cwd: str | Path | None = None) -> str:
 class Recorder:
     """A bag plus the per-namespace topic bookkeeping of the runner."""
 
-    RECORDED = (topics.TELEMETRY, topics.JOINT_STATES, topics.COMMAND, topics.TRUE_STATE)
 
     def __init__(self, path: str | Path, custom_data: Mapping[str, str] | None = None) -> None:
         self.bag = BagWriter(path, custom_data=custom_data)
-        self._namespaces: set[str] = set()
+        self._namespaces: set[tuple[str, str]] = set()
 
-    def _ensure(self, ns: str) -> None:
-        if ns not in self._namespaces:
-            for tp in self.RECORDED:
+    def _ensure(self, ns: str, *tps) -> None:
+        """Declare the topics (per namespace, on first use: no empty topics in the bag)."""
+        for tp in tps:
+            if (ns, tp.name) not in self._namespaces:
                 self.bag.add_topic(topics.qualified(tp, ns), tp.type, tp.qos)
-            self._namespaces.add(ns)
+                self._namespaces.add((ns, tp.name))
 
     @staticmethod
     def _ns_time(t: float) -> int:
@@ -48,23 +48,47 @@ class Recorder:
 
     def telemetry(self, ns: str, s: TelemetrySample) -> None:
         """Record one device sample on ``telemetry`` and ``joint_states``."""
-        self._ensure(ns)
+        self._ensure(ns, topics.TELEMETRY, topics.JOINT_STATES)
         tn = self._ns_time(s.t)
         self.bag.write(topics.qualified(topics.TELEMETRY, ns), samples.telemetry_msg(s), tn)
         self.bag.write(topics.qualified(topics.JOINT_STATES, ns), samples.joint_state_msg(s), tn)
 
     def command(self, ns: str, c: Command, t: float) -> None:
         """Record an actuation command (sent, or latched by the firmware's own schedule)."""
-        self._ensure(ns)
+        self._ensure(ns, topics.COMMAND)
         self.bag.write(topics.qualified(topics.COMMAND, ns), samples.command_msg(c, t),
                        self._ns_time(t))
 
     def true_state(self, ns: str, t: float, x: HybridState) -> None:
         """Record the simulator's true hybrid state (``sim/true_state``)."""
-        self._ensure(ns)
+        self._ensure(ns, topics.TRUE_STATE)
         self.bag.write(topics.qualified(topics.TRUE_STATE, ns),
                        samples.state_msg(t, x.xi1, x.xi2, x.q, x.act_counter, x.deact_counter,
                                          x.eta), self._ns_time(t))
+
+    def estimate(self, ns: str, e, d: float = 0.0) -> None:
+        """Record an observer estimate (observer.Estimate) with the estimator's d [rad/s]."""
+        self._ensure(ns, topics.STATE_ESTIMATE)
+        self.bag.write(topics.qualified(topics.STATE_ESTIMATE, ns),
+                       samples.state_msg(e.t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter,
+                                         e.eta_unwrapped, d, e.xi2_std, e.quality,
+                                         e.accel_disturbance), self._ns_time(e.t))
+
+    def decision(self, ns: str, t: float, dec, reference: float) -> None:
+        """Record an MPC decision (mpc.Decision) on ``mpc_status`` and its ``command``."""
+        self._ensure(ns, topics.MPC_STATUS, topics.COMMAND)
+        tn = self._ns_time(t)
+        self.bag.write(topics.qualified(topics.MPC_STATUS, ns),
+                       samples.mpc_status_msg(t, dec.command, reference, dec.predicted_speed,
+                                              dec.cost, dec.compute_time, dec.deadline_slack,
+                                              dec.candidates, dec.deadline_missed, dec.braking),
+                       tn)
+        self.bag.write(topics.qualified(topics.COMMAND, ns), samples.command_msg(dec.command, t), tn)
+
+    def reference(self, ns: str, t: float, value: float) -> None:
+        """Record a reference speed [rad/s] (std_msgs/Float64)."""
+        self._ensure(ns, topics.REFERENCE)
+        self.bag.write(topics.qualified(topics.REFERENCE, ns), {"data": value}, self._ns_time(t))
 
     def close(self) -> None:
         self.bag.close()

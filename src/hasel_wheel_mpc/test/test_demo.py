@@ -17,7 +17,7 @@ def demo(tmp_path_factory):
     import io
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        assert cli.main(["demo", "--out", str(out)]) == 0
+        assert cli.main(["table2", "--out", str(out)]) == 0
     return out, buf.getvalue()
 
 
@@ -63,7 +63,7 @@ def test_same_config_same_bag_bytes(tmp_path):
         "phi_d": {"value": math.radians(22), "unit": "rad"},
         "phi_a": {"values": [math.radians(3)], "unit": "rad"}, "priming_count": 6}}))
     for name in ("a", "b"):
-        assert cli.main(["demo", "--out", str(tmp_path / name), "--trials", str(cfg)]) == 0
+        assert cli.main(["table2", "--out", str(tmp_path / name), "--trials", str(cfg)]) == 0
     a = (tmp_path / "a" / "bag" / "bag_0.mcap").read_bytes()
     b = (tmp_path / "b" / "bag" / "bag_0.mcap").read_bytes()
     assert a == b and len(a) > 10_000
@@ -72,7 +72,7 @@ def test_same_config_same_bag_bytes(tmp_path):
 def test_bad_trials_file_is_a_clear_error(tmp_path, capsys):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text(yaml.safe_dump({"open_loop": {"phi_a": {"values": [0.5], "unit": "rad"}}}))
-    assert cli.main(["demo", "--out", str(tmp_path / "o"), "--trials", str(cfg)]) == 2
+    assert cli.main(["table2", "--out", str(tmp_path / "o"), "--trials", str(cfg)]) == 2
     err = capsys.readouterr().err
     assert "phi_a.values[0]" in err and "0.5" in err and "rad" in err
 
@@ -108,3 +108,31 @@ def test_link_run_drives_the_wheel_over_a_pty_and_records(tmp_path, capsys):
     counts = {t["topic_metadata"]["name"]: t["message_count"]
               for t in info["rosbag2_bagfile_information"]["topics_with_message_count"]}
     assert counts["/wheel0/telemetry"] > 12 * 300 * 0.9 and counts["/wheel0/command"] > 50
+
+
+def test_closed_loop_demo_writes_bag_plots_and_table(tmp_path, capsys):
+    from rosbags.highlevel import AnyReader
+    out = tmp_path / "cl"
+    assert cli.main(["demo", "--out", str(out), "--hold-scale", "0.25", "--no-compare"]) == 0
+    text = capsys.readouterr().out
+    assert "with estimator (tracking)" in text and "fall time ~1.2 s" in text
+    for name in ("fig11a_without_estimator.png", "fig11b_with_estimator.png"):
+        assert not (out / name).exists() or name.startswith("fig11b")
+    assert (out / "fig11b_with_estimator.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    topics_seen = {}
+    with AnyReader([out / "bag"]) as reader:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            topics_seen.setdefault(conn.topic, []).append(msg)
+    refs = [m.data for m in topics_seen["/wheel0/reference_speed"]]
+    assert refs == [1.0, 1.5, 2.0, 2.5, 2.6, 2.0]                     # the Fig. 11 profile
+    status = topics_seen["/wheel0/mpc_status"]
+    assert len(status) == len(topics_seen["/wheel0/command"]) > 50
+    assert all(s.candidates_evaluated >= 15 for s in status if not s.braking)
+    est = topics_seen["/wheel0/state_estimate"]
+    assert len(est) == len(topics_seen["/wheel0/telemetry"]) > 10000
+
+
+def test_closed_loop_demo_refuses_a_bad_hold_scale(tmp_path, capsys):
+    assert cli.main(["demo", "--out", str(tmp_path / "o"), "--hold-scale", "0"]) == 2
+    assert "--hold-scale 0.0: expected a positive factor" in capsys.readouterr().err

@@ -9,6 +9,7 @@ from hasel_wheel_mpc.mpc import Mpc, MpcConfig, cost_59, costs_59
 from hasel_wheel_sim.model import SECTOR
 
 D = math.radians
+TICK_S = 1.0 / 300.0
 
 
 def test_cost_59_by_hand():
@@ -41,7 +42,7 @@ def test_braking_when_the_speed_is_above_the_reference_by_the_threshold():
 
 
 def test_no_complete_cycle_falls_back_to_the_strongest_push():
-    mpc = Mpc(config=MpcConfig(max_horizon=0.05))
+    mpc = Mpc(config=MpcConfig(max_horizon=0.05, phi_d=(D(20), D(22))))
     dec = mpc.decide(1 * SECTOR + D(3), 1.0, 1, D(3), D(22), reference=2.0)
     assert (dec.command.phi_a, dec.command.phi_d) == (D(1), D(22)) and math.isinf(dec.cost)
 
@@ -56,5 +57,97 @@ def test_short_closed_loop_on_the_nominal_plant_settles_near_the_reference():
     from hasel_wheel_mpc.closed_loop import run_closed_loop, segment_metrics
     profile = ((0.0, 2.0),)
     log = run_closed_loop(profile=profile, duration=30.0)
-    (ref, ss, nrmse, settle), = segment_metrics(log, profile, 30.0)
-    assert ss < 3.0 and nrmse < 0.05 and settle < 10.0
+    (ref, ss, nrmse, _, settle), = segment_metrics(log, profile, 30.0)
+    assert ss < 0.5 and nrmse < 0.03 and settle < 10.0
+
+
+def _state_after_switch_on(mpc, w, eta=5, pa=D(8), pd=D(22)):
+    from hasel_wheel_sim import layout as L
+    s = mpc._base.copy()
+    s[L.S_XI1], s[L.S_XI2], s[L.S_Q], s[L.S_ETA], s[L.S_ARMED] = eta * SECTOR + pa, w, 1, eta, 1
+    s[L.S_PHI_A], s[L.S_PHI_D] = pa, pd
+    s[L.S_THETA_ON], s[L.S_THETA_OFF] = eta * SECTOR + pa, eta * SECTOR + pd
+    s[L.S_PEND], s[L.S_PEND_NA] = 1, eta + 1
+    return s
+
+
+@pytest.mark.parametrize("w", [0.7, 1.0, 2.0, 4.46])
+def test_shared_prefix_predictor_equals_the_full_horizon_simulation(w):
+    """predict_cycle_costs (prefix once, each candidate stops at its switch-off) gives the
+    same costs, bit for bit, as simulating every candidate over the whole horizon."""
+    from hasel_wheel_mpc.mpc import predict_cycle_costs
+    from hasel_wheel_sim import layout as L
+    from hasel_wheel_sim.integrator import simulate_batch
+    from hasel_wheel_sim.wheel import TICK
+    cfg = MpcConfig(phi_a=tuple(D(x) for x in np.arange(1, 15.01, 1.0)),
+                    phi_d=(D(18), D(20), D(22)))
+    mpc = Mpc(config=cfg)
+    s = _state_after_switch_on(mpc, w)
+    n, ticks = len(mpc.cands), int(2.3 * SECTOR / w / TICK)
+    states = np.tile(s, (n, 1))
+    states[:, L.S_PEND_PHI_A], states[:, L.S_PEND_PHI_D] = mpc.cands[:, 0], mpc.cands[:, 1]
+    out = np.empty((n, ticks, 3))
+    simulate_batch(states, np.tile(mpc.pv, (n, 1)), TICK, ticks, out)
+    for tw in (False, True):
+        full = np.empty(n)
+        costs_59(out, 1.5, 0.1, full, 1.0)
+        fast, means = np.empty(n), np.empty(n)
+        k = predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, 1.5, 0.1, 1.0, tw, fast, means)
+        if not tw:
+            assert np.array_equal(np.isfinite(full), np.isfinite(fast)) and np.isfinite(fast).any()
+            assert np.array_equal(full[np.isfinite(full)], fast[np.isfinite(fast)])
+        # the prefix is the time to the current switch-off: (22 - 8) deg at ~w, in ticks
+        assert k * TICK == pytest.approx(D(14) / w, rel=0.15)
+    # time-weighted: the mean over the cycle's samples of (v + d - ref)^2, plus the terminal term
+    i = int(np.flatnonzero(np.isfinite(fast))[0])
+    q = out[i, :, 2]
+    a = int(np.flatnonzero((q[:-1] == 1) & (q[1:] == 0))[0]) + 1
+    c = int(np.flatnonzero((q[a:-1] == 1) & (q[a + 1:] == 0))[0]) + a + 1
+    e = out[i, a:c, 1] + 0.1 - 1.5
+    assert fast[i] == pytest.approx(np.mean(e ** 2) + 1.0 * e[-1] ** 2, rel=1e-12)
+    assert means[i] == pytest.approx(np.mean(out[i, a:c, 1]), rel=1e-12)
+
+
+class FakeClock:
+    """Each reading advances by ``step`` seconds."""
+
+    def __init__(self, step):
+        self.t, self.step = 0.0, step
+
+    def __call__(self):
+        self.t += self.step
+        return self.t
+
+
+def test_a_late_decision_is_replaced_by_the_fallback_and_counted():
+    on_time = Mpc()
+    xi1 = 1 * SECTOR + D(8)
+    good = on_time.decide(xi1, 2.0, 1, D(8), D(22), reference=2.0)
+    assert not good.deadline_missed and good.deadline_slack > 0
+    # 14 deg at 2 rad/s leaves ~0.12 s; a decision that takes 1 s is too late
+    late = Mpc(clock=FakeClock(1.0))
+    late.last_drive = (D(7.5), D(22))
+    dec = late.decide(xi1, 2.0, 1, D(8), D(22), reference=2.0)
+    assert dec.deadline_missed and dec.deadline_slack == pytest.approx(
+        good.deadline_slack + good.compute_time - 1.0, abs=2 * TICK_S)
+    assert (dec.command.n_a, dec.command.phi_a, dec.command.phi_d) == (2, D(7.5), D(22))
+    assert late.deadline_misses == 1 and on_time.deadline_misses == 0
+
+
+def test_refinement_searches_phi_a_and_phi_d_jointly_around_the_coarse_winner():
+    cfg = MpcConfig()
+    assert len(cfg.candidates()) == 15                       # the paper's floor
+    fine = cfg.refinement(D(10))
+    assert {round(math.degrees(x), 6) for x in fine[:, 1]} == {20.0, 21.0, 22.0}
+    assert np.allclose(sorted(set(np.round(np.degrees(fine[:, 0]), 6))),
+                       [9.25, 9.5, 9.75, 10, 10.25, 10.5, 10.75])
+    dec = Mpc().decide(1 * SECTOR + D(8), 2.0, 1, D(8), D(22), reference=2.0)
+    assert 15 < dec.candidates <= 15 + 7 * 3
+
+
+@pytest.mark.parametrize("kw, match", [({"phi_a": (D(30),)}, "phi_a"),
+                                       ({"brake_threshold": 0.0}, "brake_threshold"),
+                                       ({"brake_phi_a": D(-3), "brake_phi_d": D(-6)}, "braking")])
+def test_bad_configurations_are_refused(kw, match):
+    with pytest.raises(ValueError, match=match):
+        MpcConfig(**kw)

@@ -70,3 +70,29 @@ def test_realistic_plant_model_mismatch():
     # dropouts, latency: the nominal model in the observer is not the plant
     t, v, est, ang, _, keep, _ = run(REALISTIC)
     assert rmse(est[keep], v[keep]) <= 0.02
+
+
+def test_observer_recovers_a_known_off_centre_mass():
+    # com_offset: torque -T sin(xi1 + phase), i.e. a_d = -(T/I)(sin(phase) cos xi1 + cos(phase) sin xi1)
+    from hasel_wheel_sim.params import WheelParams
+    torque, phase = 0.004, 0.5
+    fx = dict(ENCODER, com_offset={"enabled": True, "torque": {"value": torque, "unit": "N*m"},
+                                   "phase": {"value": phase, "unit": "rad"}})
+    *_, obs = run(fx, seconds=60.0)
+    amp = torque / WheelParams().inertia                   # 0.112 rad/s^2
+    c, a, b = obs.x[2:5]
+    assert c == pytest.approx(0.0, abs=0.03 * amp / 0.112 + 0.02)
+    assert a == pytest.approx(-amp * math.sin(phase), abs=0.2 * amp)
+    assert b == pytest.approx(-amp * math.cos(phase), abs=0.2 * amp)
+
+
+def test_without_the_disturbance_state_the_coefficients_stay_zero():
+    p = Plant(config=PlantConfig(seed=1, effects=effects_from_mapping(ENCODER)), xi2=1.0)
+    p.open_loop(D(9), D(22))
+    obs = Observer(config=ObserverConfig(default_phi_a=D(9), disturbance_rate=0.0,
+                                         initial_disturbance_std=0.0))
+    for _ in range(600):
+        s = p.step()
+        if s is not None:
+            e = obs.step(s)
+    assert e.accel_coefficients == (0.0, 0.0, 0.0)

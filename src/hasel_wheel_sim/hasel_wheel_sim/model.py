@@ -144,7 +144,9 @@ def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
         tau += pv[L.P_PLATFORM_TORQUE] * math.sin(pv[L.P_PIVOT_RATIO] * xi1 + pv[L.P_PLATFORM_PHASE])
     if pv[L.P_VISCOUS] != 0.0:
         tau -= pv[L.P_VISCOUS] * xi2
-    return tau
+    if pv[L.P_BIAS_COS] != 0.0 or pv[L.P_BIAS_SIN] != 0.0:
+        tau += pv[L.P_BIAS_COS] * math.cos(xi1) + pv[L.P_BIAS_SIN] * math.sin(xi1)
+    return tau + pv[L.P_BIAS_TORQUE]
 
 
 @jit_inline
