@@ -132,8 +132,13 @@ def test_one_percent_byte_corruption(tmp_path, monkeypatch):
     try:
         run_sim_seconds(vt, core, seq, 60.0)
     finally:
-        rep = vt.stop()             # the device first: nothing is left in flight ...
-        time.sleep(0.2)             # ... once the host has read what is on the line
+        rep = vt.stop()             # the device first: nothing more is sent; then wait
+        # (not a fixed sleep: under load the reader can lag) until the host has read up to
+        # the device's last intact frame, or 5 s have passed
+        last_sent = max(f.counter for f in rep.sent if f.intact)
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and all(f.counter != last_sent for f in decoded[-20:]):
+            time.sleep(0.02)
         st = core.decoder.stats
         core.shutdown()
     sent = {f.counter: f for f in rep.sent}
