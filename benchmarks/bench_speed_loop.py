@@ -58,6 +58,43 @@ def sawtooth_floor() -> tuple[float, float]:
     return float(v.mean()), float(v.std() / v.mean())
 
 
+def shared_prefix_speedup(w: float) -> tuple[float, float]:
+    """(full-horizon batch [s], shared-prefix predictor [s]) for one decision's 116 candidates."""
+    from hasel_wheel_mpc.mpc import predict_cycle_costs
+    from hasel_wheel_sim import layout as L
+    from hasel_wheel_sim.integrator import simulate_batch
+    from hasel_wheel_sim.wheel import TICK
+    mpc = Mpc(config=MpcConfig(phi_a=tuple(D(x) for x in np.arange(1.0, 15.01, 0.5)),
+                               phi_d=tuple(D(x) for x in (16.0, 18.0, 20.0, 22.0))))
+    s = mpc._base.copy()
+    s[L.S_XI1], s[L.S_XI2], s[L.S_Q], s[L.S_ETA], s[L.S_ARMED] = 5 * SECTOR + D(8), w, 1, 5, 1
+    s[L.S_PHI_A], s[L.S_PHI_D] = D(8), D(22)
+    s[L.S_THETA_ON], s[L.S_THETA_OFF] = 5 * SECTOR + D(8), 5 * SECTOR + D(22)
+    s[L.S_PEND], s[L.S_PEND_NA] = 1, 6
+    n, ticks = len(mpc.cands), int(2.5 * SECTOR / w / TICK)
+    costs, means = np.empty(n), np.empty(n)
+
+    def full():
+        st = np.tile(s, (n, 1))
+        st[:, L.S_PEND_PHI_A], st[:, L.S_PEND_PHI_D] = mpc.cands[:, 0], mpc.cands[:, 1]
+        simulate_batch(st, np.tile(mpc.pv, (n, 1)), TICK, ticks, np.empty((n, ticks, 3)))
+
+    def shared():
+        predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, w, 0.0, 1.0, True, costs, means)
+
+    out = []
+    for f in (full, shared):
+        f()
+        out.append(min(_clock(f) for _ in range(10)))
+    return out[0], out[1]
+
+
+def _clock(f) -> float:
+    t0 = time.perf_counter()
+    f()
+    return time.perf_counter() - t0
+
+
 def candidates_in_2ms(w: float) -> tuple[float, float]:
     """(seconds per candidate, fixed seconds per decision) at speed w, by a linear fit."""
     n_list, t_list = [], []
@@ -107,6 +144,10 @@ def main() -> None:
     print(f"  MPC decision latency p50 {np.percentile(lat, 50) * 1e3:.2f} ms, p99 "
           f"{np.percentile(lat, 99) * 1e3:.2f} ms, {int(np.median(cands))} candidates per decision "
           f"(15 coarse + joint refinement; target p99 <= 2 ms)")
+    for w in (1.0, 2.0, w07):
+        full, shared = shared_prefix_speedup(w)
+        print(f"  116 candidates at {w:.2f} rad/s: full horizon {full * 1e3:.2f} ms, shared prefix "
+              f"{shared * 1e3:.2f} ms ({full / shared:.1f}x)")
     per, fixed = candidates_in_2ms(w07)
     print(f"  at 0.7 m/s ({w07:.2f} rad/s) the actuator is on for {(D(22) - D(1)) / w07 * 1e3:.0f} ms "
           f"(phi_a 1 deg) to {(D(22) - D(15)) / w07 * 1e3:.0f} ms (15 deg) after a decision; "

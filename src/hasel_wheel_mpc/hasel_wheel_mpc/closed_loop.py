@@ -119,7 +119,7 @@ def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
         # (only with time to spare before the switch-off: 20 ms; otherwise the next one decides)
         redecide = (ref != last_ref and s.q == 1 and not switched_on
                     and e.deact_counter > 0.02 * max(speed, 0.1))
-        if recorder is not None and (ref != last_ref or not log.t[:-1]):
+        if recorder is not None and (ref != last_ref or len(log.t) == 1):
             recorder.reference(ns, s.t, ref)
         last_ref = ref
         if switched_on or idle == 150 or redecide:

@@ -105,12 +105,19 @@ class Decision(NamedTuple):
     deadline_missed: bool = False      # True: the fallback was sent instead
 
 
-def cost_59(speed: np.ndarray, q: np.ndarray, reference: float, d: float = 0.0) -> float:
-    """J of (59) for one predicted trajectory that starts with the current actuator on.
+def cost_59(speed: np.ndarray, q: np.ndarray, reference: float, d: float = 0.0,
+            terminal_weight: float = 0.0, time_weighted: bool = False) -> float:
+    """J for one predicted trajectory that starts with the current actuator on [(rad/s)^2].
 
-    ``speed``, ``q`` (n,) per tick.  Segments: after the current switch-off (first 1 -> 0),
-    q = 0 until the candidate's switch-on, then q = 1 until its switch-off.  Returns +inf if
-    the horizon does not contain the whole cycle.
+    The plain reference of what :func:`predict_cycle_costs` computes inside its loop.
+    ``speed`` [rad/s], ``q`` (n,) per tick.  Segments: after the current switch-off (first
+    1 -> 0), q = 0 until the candidate's switch-on, then q = 1 until its switch-off.
+    (59): 1/2 (mean of segment 0 + mean of segment 1) of (speed + d - reference)^2; with
+    ``time_weighted`` the mean over both segments' samples instead; plus ``terminal_weight``
+    times the squared error of the last sample before the candidate's switch-off (0 turns it
+    off: (59) alone, e.g. the paper's search with phi_d fixed at 22 deg; searching phi_d too,
+    (59) alone picks a weak push that looks good for one cycle and leaves the wheel too slow
+    for the next).  Returns +inf if the horizon does not contain the whole cycle.
     """
     qi = q.astype(np.int8)
     edges = np.flatnonzero(np.diff(qi)) + 1         # indices where q changes
@@ -128,48 +135,11 @@ def cost_59(speed: np.ndarray, q: np.ndarray, reference: float, d: float = 0.0) 
         return math.inf
     c = off_after[0]
     e = speed + d - reference
-    return 0.5 * (float(np.mean(e[a:b] ** 2)) + float(np.mean(e[b:c] ** 2)))
-
-
-@jit
-def costs_59(out: np.ndarray, reference: float, d: float, costs: np.ndarray,
-             terminal_weight: float = 0.0) -> None:
-    """:func:`cost_59` for every row of ``out`` (n, ticks, 3) at once (compiled).
-
-    With ``terminal_weight`` w_T > 0 it adds w_T (xi2 + d - ref)^2 at the candidate's
-    switch-off: (59) alone looks at one cycle only, and a joint (phi_a, phi_d) search then
-    happily picks a weak push that stays near the reference this cycle and leaves the wheel
-    too slow for the next (observed).  The paper, searching phi_a only with phi_d = 22 deg,
-    did not meet this.
-    """
-    for i in range(out.shape[0]):
-        a = -1
-        b = -1
-        c = -1
-        for k in range(1, out.shape[1]):
-            q0 = out[i, k - 1, 2]
-            q1 = out[i, k, 2]
-            if q0 == 1.0 and q1 == 0.0:
-                if a < 0:
-                    a = k
-                elif b >= 0:
-                    c = k
-                    break
-            elif q0 == 0.0 and q1 == 1.0 and a >= 0 and b < 0:
-                b = k
-        if c < 0:
-            costs[i] = math.inf
-            continue
-        s0 = 0.0
-        for k in range(a, b):
-            e = out[i, k, 1] + d - reference
-            s0 += e * e
-        s1 = 0.0
-        for k in range(b, c):
-            e = out[i, k, 1] + d - reference
-            s1 += e * e
-        end = out[i, c - 1, 1] + d - reference
-        costs[i] = 0.5 * (s0 / (b - a) + s1 / (c - b)) + terminal_weight * end * end
+    if time_weighted:
+        j = float(np.mean(e[a:c] ** 2))
+    else:
+        j = 0.5 * (float(np.mean(e[a:b] ** 2)) + float(np.mean(e[b:c] ** 2)))
+    return j + terminal_weight * float(e[c - 1]) ** 2
 
 
 @jit
@@ -182,9 +152,9 @@ def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: fl
     (phi_a, phi_d) [rad] for the next pad.  Every candidate's trajectory is identical until
     the current actuator switches off, so that prefix is simulated once; each candidate then
     runs from the start of that tick until its own switch-off and stops.  The samples and
-    the cost are those of :func:`costs_59` on the full-horizon simulation (same ticks, same
-    arithmetic), with ``time_weighted`` replacing the mean of the two segment means by the
-    mean over all samples of the cycle.  Writes ``costs`` (n,) [(rad/s)^2] (inf when the
+    the cost are those of :func:`cost_59` on the full-horizon simulation (same ticks; tested),
+    with ``time_weighted`` replacing the mean of the two segment means by the mean over all
+    samples of the cycle.  Writes ``costs`` (n,) [(rad/s)^2] (inf when the
     cycle does not finish within ``max_ticks``) and ``means`` (n,), the model's mean speed
     over the cycle [rad/s] (d not added).  Returns the prefix length in ticks (the time left
     before the current switch-off, in units of h), or -1 if it does not switch off in time.

@@ -116,9 +116,9 @@ def test_closed_loop_demo_writes_bag_plots_and_table(tmp_path, capsys):
     assert cli.main(["demo", "--out", str(out), "--hold-scale", "0.25", "--no-compare"]) == 0
     text = capsys.readouterr().out
     assert "with estimator (tracking)" in text and "fall time ~1.2 s" in text
-    for name in ("fig11a_without_estimator.png", "fig11b_with_estimator.png"):
-        assert not (out / name).exists() or name.startswith("fig11b")
-    assert (out / "fig11b_with_estimator.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (out / "fig11a_without_estimator.png").exists()       # --no-compare: no such run
+    for name in ("fig11b_with_estimator.png", "fig11c_braking_step.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     topics_seen = {}
     with AnyReader([out / "bag"]) as reader:
         for conn, _, raw in reader.messages():

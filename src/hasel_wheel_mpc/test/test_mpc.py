@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_mpc.mpc import Mpc, MpcConfig, cost_59, costs_59
+from hasel_wheel_mpc.mpc import Mpc, MpcConfig, cost_59
 from hasel_wheel_sim.model import SECTOR
 
 D = math.radians
@@ -20,14 +20,12 @@ def test_cost_59_by_hand():
     seg0 = ((1 - 2) ** 2 + 0 + (3 - 2) ** 2) / 3          # = 2/3
     seg1 = ((2.5 - 2) ** 2 + 0 + (1.5 - 2) ** 2) / 3      # = 1/6
     assert cost_59(v, q, ref) == pytest.approx(0.5 * (seg0 + seg1))
-    out = np.stack([v, v, q], axis=-1)[None]
-    c = np.empty(1)
-    costs_59(out, ref, 0.0, c, 0.0)
-    assert c[0] == pytest.approx(0.5 * (seg0 + seg1))
-    costs_59(out, ref, 0.0, c, 2.0)                       # terminal term at the switch-off tick
-    assert c[0] == pytest.approx(0.5 * (seg0 + seg1) + 2.0 * (1.5 - 2.0) ** 2)
-    costs_59(out, ref, 0.5, c, 0.0)                       # d shifts the predicted speed
-    assert c[0] == pytest.approx(0.5 * (((1.5 - 2) ** 2 + 0.25 + 2.25) / 3 + (1 + 0.25 + 0) / 3))
+    assert cost_59(v, q, ref, terminal_weight=2.0) == pytest.approx(    # last q = 1 sample
+        0.5 * (seg0 + seg1) + 2.0 * (1.5 - 2.0) ** 2)
+    assert cost_59(v, q, ref, d=0.5) == pytest.approx(                  # d shifts the speed
+        0.5 * (((1.5 - 2) ** 2 + 0.25 + 2.25) / 3 + (1 + 0.25 + 0) / 3))
+    everything = (1 + 0 + 1 + 0.25 + 0 + 0.25) / 6                       # all six samples
+    assert cost_59(v, q, ref, time_weighted=True) == pytest.approx(everything)
     assert cost_59(v[:6], q[:6], ref) == math.inf         # horizon too short: no full cycle
 
 
@@ -74,7 +72,7 @@ def _state_after_switch_on(mpc, w, eta=5, pa=D(8), pd=D(22)):
 @pytest.mark.parametrize("w", [0.7, 1.0, 2.0, 4.46])
 def test_shared_prefix_predictor_equals_the_full_horizon_simulation(w):
     """predict_cycle_costs (prefix once, each candidate stops at its switch-off) gives the
-    same costs, bit for bit, as simulating every candidate over the whole horizon."""
+    costs of cost_59 on every candidate simulated over the whole horizon."""
     from hasel_wheel_mpc.mpc import predict_cycle_costs
     from hasel_wheel_sim import layout as L
     from hasel_wheel_sim.integrator import simulate_batch
@@ -89,13 +87,12 @@ def test_shared_prefix_predictor_equals_the_full_horizon_simulation(w):
     out = np.empty((n, ticks, 3))
     simulate_batch(states, np.tile(mpc.pv, (n, 1)), TICK, ticks, out)
     for tw in (False, True):
-        full = np.empty(n)
-        costs_59(out, 1.5, 0.1, full, 1.0)
+        full = np.array([cost_59(out[i, :, 1], out[i, :, 2], 1.5, 0.1, 1.0, tw) for i in range(n)])
         fast, means = np.empty(n), np.empty(n)
         k = predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, 1.5, 0.1, 1.0, tw, fast, means)
-        if not tw:
-            assert np.array_equal(np.isfinite(full), np.isfinite(fast)) and np.isfinite(fast).any()
-            assert np.array_equal(full[np.isfinite(full)], fast[np.isfinite(fast)])
+        assert np.array_equal(np.isfinite(full), np.isfinite(fast)) and np.isfinite(fast).sum() > 20
+        ok = np.isfinite(full)
+        assert np.allclose(fast[ok], full[ok], rtol=1e-12, atol=0.0)
         # the prefix is the time to the current switch-off: (22 - 8) deg at ~w, in ticks
         assert k * TICK == pytest.approx(D(14) / w, rel=0.15)
     # time-weighted: the mean over the cycle's samples of (v + d - ref)^2, plus the terminal term
