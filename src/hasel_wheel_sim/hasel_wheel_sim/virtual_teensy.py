@@ -183,6 +183,7 @@ class VirtualTeensy:
         self.received: list[HostFrame] = []
         self.write_drops = 0
         self.faults_seen: list[str] = []     # firmware exceptions (each cut HV)
+        self.re_anchors = 0                   # times the tick loop fell behind and re-anchored
         self._state = _State()
         self._lock = threading.Lock()
         self._master = -1
@@ -237,6 +238,9 @@ class VirtualTeensy:
                 os.close(self._master)
                 self._master = -1
 
+    #: Wall time [s] the tick loop may fall behind before it re-anchors (see ``_run``).
+    CATCH_UP_LIMIT = 0.05
+
     def stall(self, seconds: float) -> None:
         """Stop talking and listening for ``seconds`` of wall time (a hung USB stack)."""
         self._state.stall_until = time.monotonic() + seconds
@@ -247,8 +251,15 @@ class VirtualTeensy:
         while self._state.running:
             now = time.monotonic()
             if now >= next_tick:
-                next_tick += 1.0 / self.fw.config.telemetry_rate_hz / self.time_scale
-                if next_tick < now - 1.0:          # far behind (debugger, suspend): re-anchor
+                period = 1.0 / self.fw.config.telemetry_rate_hz / self.time_scale
+                next_tick += period
+                # Behind by more than CATCH_UP_LIMIT of wall time (this process was not
+                # scheduled): re-anchor instead of running the missed ticks in a burst.  A burst
+                # would advance device time with no chance for host frames to arrive in between,
+                # and trip the watchdog on a host that was never silent.  A real Teensy's timer
+                # interrupt does not fall behind, so neither does this device's clock.
+                if next_tick < now - self.CATCH_UP_LIMIT:
+                    self.re_anchors += 1
                     next_tick = now + period
                 with self._lock:
                     try:
@@ -343,6 +354,7 @@ class DeviceReport:
     write_drops: int
     faults_seen: list[str] = field(default_factory=list)
     host_stream_dropped: int = 0    # host frames the device dropped (CRC, framing, ...)
+    re_anchors: int = 0             # times the tick loop fell behind and re-anchored
 
 
 def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> None:
@@ -366,7 +378,7 @@ def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> No
             conn.send(DeviceReport(vt.sent, vt.received, vt.fw.hv_enabled, vt.fw.estop,
                                    vt.fw.faults, vt.fw.hv_off_t, vt.fw.plant.t,
                                    float(vt.fw.plant.wheel.s[L.S_XI2]), vt.write_drops,
-                                   vt.faults_seen, vt.decoder.stats.dropped))
+                                   vt.faults_seen, vt.decoder.stats.dropped, vt.re_anchors))
             return
         conn.send(None)
 
