@@ -1,0 +1,144 @@
+"""The library of candidate effects: physical extensions of the hybrid model.
+
+Each candidate is a parameterised extension with a stable identifier (used in report.json
+and documented in the README).  ``apply`` writes its parameters into the model's parameter
+vector, so the fit, the free-run simulation, the plant and the MPC's predictor all evaluate
+the very same physics (:mod:`hasel_wheel_sim.model`).  Parameters are chosen so that "no
+effect" is a parameter value (0, or equal gains) and the fit is smooth around it.
+
+==================  =======================================================================
+identifier          physics (axle torque, or factor on the actuator force)
+==================  =======================================================================
+viscous_drag        -c xi2                                   c [N*m*s/rad]
+com_offset          A cos(xi1) + B sin(xi1)                  A, B [N*m]  (once per turn)
+platform_periodic   P sin((r/L) xi1) + Q cos((r/L) xi1)      P, Q [N*m]  (once per pivot lap)
+rise_lag            force x (1 - exp(-t_on / tau))           tau [s]
+charge_retention    force x exp(-rate Q_i), Q_i' = q_i - Q_i/T   rate [1/s], T [s]
+gain_spread         actuator i's force x exp(d_i), sum d_i = 0   d_1..d_15 [1]
+angle_offset        pads sit delta further along than the encoder's zero   delta [rad]
+==================  =======================================================================
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.model import N_ACTUATORS, SECTOR
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One fitted parameter: name, unit, start value, bounds and a typical magnitude."""
+
+    name: str
+    unit: str
+    start: float
+    lower: float
+    upper: float
+    scale: float
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A parameterised effect; ``apply(x, pv, extra)`` writes values x (k,) into pv."""
+
+    id: str
+    title: str
+    params: tuple[ParamSpec, ...]
+    apply: Callable[[np.ndarray, np.ndarray, dict], None]
+    describe: Callable[[np.ndarray], dict]
+    axis: str   # the residual axis on which its signature shows
+
+    @property
+    def size(self) -> int:
+        return len(self.params)
+
+
+def _viscous(x, pv, extra):
+    pv[L.P_VISCOUS] = x[0]
+
+
+def _com(x, pv, extra):
+    pv[L.P_BIAS_COS] += x[0]
+    pv[L.P_BIAS_SIN] += x[1]
+
+
+def _com_describe(x):
+    torque = math.hypot(x[0], x[1])
+    # A cos + B sin = -T sin(xi1 + phase)  (the plant's com_offset convention)
+    return {"torque_N_m": torque, "phase_rad": math.atan2(-x[0], -x[1])}
+
+
+def _platform(x, pv, extra):
+    pv[L.P_PLATFORM_TORQUE] = math.hypot(x[0], x[1])
+    pv[L.P_PLATFORM_PHASE] = math.atan2(x[1], x[0])
+
+
+def _platform_describe(x):
+    return {"torque_N_m": math.hypot(x[0], x[1]), "phase_rad": math.atan2(x[1], x[0])}
+
+
+def _rise(x, pv, extra):
+    pv[L.P_RISE_TIME] = x[0]
+
+
+def _retention(x, pv, extra):
+    pv[L.P_RET_RATE] = x[0]
+    pv[L.P_RET_RECOVERY] = x[1]
+
+
+def _spread(x, pv, extra):
+    d = np.concatenate(([-np.sum(x)], x))
+    pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS] *= np.exp(d)
+
+
+def _spread_describe(x):
+    d = np.concatenate(([-np.sum(x)], x))
+    g = np.exp(d)
+    return {"gains": [float(v) for v in g], "std": float(np.std(g))}
+
+
+def _offset(x, pv, extra):
+    extra["eta_offset"] = extra.get("eta_offset", 0.0) + x[0] / SECTOR
+
+
+LIBRARY: tuple[Candidate, ...] = (
+    Candidate("viscous_drag", "viscous drag at the axle",
+              (ParamSpec("c", "N*m*s/rad", 1e-4, 0.0, 0.1, 1e-3),), _viscous,
+              lambda x: {"coefficient_N_m_s_per_rad": float(x[0])}, "speed"),
+    Candidate("com_offset", "centre of mass off the axle (gravity torque once per turn)",
+              (ParamSpec("A", "N*m", 0.0, -0.5, 0.5, 1e-3),
+               ParamSpec("B", "N*m", 0.0, -0.5, 0.5, 1e-3)), _com, _com_describe, "wheel_angle"),
+    Candidate("platform_periodic", "torque periodic in the pivot angle (uneven platform)",
+              (ParamSpec("P", "N*m", 0.0, -0.5, 0.5, 1e-3),
+               ParamSpec("Q", "N*m", 0.0, -0.5, 0.5, 1e-3)), _platform, _platform_describe,
+              "pivot_angle"),
+    Candidate("rise_lag", "actuator force builds up after switch-on",
+              (ParamSpec("tau", "s", 0.005, 1e-5, 0.5, 0.01),), _rise,
+              lambda x: {"time_constant_s": float(x[0])}, "on_time"),
+    Candidate("charge_retention", "actuators weaken with accumulated HV time",
+              (ParamSpec("rate", "1/s", 1e-3, 0.0, 1.0, 1e-2),
+               ParamSpec("recovery", "s", 60.0, 1.0, 1e5, 60.0)), _retention,
+              lambda x: {"rate_per_s": float(x[0]), "recovery_s": float(x[1])}, "hv_time"),
+    Candidate("gain_spread", "fabrication spread of the 16 actuators' force",
+              tuple(ParamSpec(f"d{i}", "1", 0.0, -1.5, 1.5, 0.05) for i in range(1, N_ACTUATORS)),
+              _spread, _spread_describe, "actuator"),
+    Candidate("angle_offset", "pads offset from the encoder's zero",
+              (ParamSpec("delta", "rad", 0.0, -SECTOR / 2, SECTOR / 2, 0.01),), _offset,
+              lambda x: {"offset_rad": float(x[0])}, "contact_angle"),
+)
+
+BY_ID = {c.id: c for c in LIBRARY}
+
+
+def library(ids: list[str] | None = None, exclude: list[str] | None = None) -> tuple[Candidate, ...]:
+    """Candidates by identifier (all by default), minus ``exclude``; unknown ids raise."""
+    for i in (ids or []) + (exclude or []):
+        if i not in BY_ID:
+            raise ValueError(f"unknown candidate effect {i!r}; known: {sorted(BY_ID)}")
+    chosen = [BY_ID[i] for i in ids] if ids else list(LIBRARY)
+    return tuple(c for c in chosen if c.id not in (exclude or []))

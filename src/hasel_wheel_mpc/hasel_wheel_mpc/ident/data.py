@@ -1,0 +1,313 @@
+"""Trials for identification: one recording of one wheel, from a CSV file or a bag.
+
+A :class:`Trial` holds per-sample arrays, SI units, angles in radians:
+
+=========  ==========================================================================
+t          sample time [s], strictly increasing
+angle      wheel angle xi1 [rad], unwrapped
+q          1 while the actuator of interest is on, else 0
+eta        actuator of interest 0..15 (driven, or in contact)
+n_a        target actuator of the command in effect, -1 when none is scheduled
+phi_a      activation angle of the command in effect [rad] (nan when none)
+phi_d      deactivation angle of the command in effect [rad] (nan when none)
+speed      measured speed [rad/s], optional (motion capture); None when absent
+=========  ==========================================================================
+
+From these it derives the unwrapped sector of the actuator of interest, the activations
+(runs of q = 1, each with its pad and angles) and the coast-down segments (no actuator
+scheduled and none on).
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from hasel_wheel_sim.model import N_ACTUATORS, SECTOR
+
+#: CSV columns: required, and optional.
+CSV_REQUIRED = ("t", "angle", "q", "eta", "n_a", "phi_a", "phi_d")
+CSV_OPTIONAL = ("speed",)
+#: A coast-down segment must last at least this long [s] to be used for friction.
+MIN_COAST = 1.0
+
+
+class TrialError(ValueError):
+    """A trial's data is unusable; the message names the file, row and column at fault."""
+
+
+@dataclass
+class Activation:
+    """One switch-on of one actuator: samples [start, stop) have q = 1."""
+
+    start: int
+    stop: int
+    eta: int          # unwrapped sector index
+    phi_a: float      # [rad]
+    phi_d: float      # [rad]
+
+
+@dataclass
+class Trial:
+    """One recording (see the module docstring for the arrays)."""
+
+    name: str
+    t: np.ndarray
+    angle: np.ndarray
+    q: np.ndarray
+    eta: np.ndarray
+    n_a: np.ndarray
+    phi_a: np.ndarray
+    phi_d: np.ndarray
+    speed: np.ndarray | None = None
+    source: str = ""
+    eta_unwrapped: np.ndarray = field(init=False)
+    activations: list[Activation] = field(init=False)
+    coasts: list[tuple[int, int]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        where = self.source or self.name
+        n = self.t.shape[0]
+        for k in ("angle", "q", "eta", "n_a", "phi_a", "phi_d"):
+            if getattr(self, k).shape != (n,):
+                raise TrialError(f"{where}: column {k} has shape {getattr(self, k).shape}, "
+                                 f"expected ({n},) like t")
+        if n < 30:
+            raise TrialError(f"{where}: {n} samples; a trial needs at least 30")
+        dt = np.diff(self.t)
+        if not np.all(dt > 0):
+            k = int(np.argmax(dt <= 0)) + 1
+            raise TrialError(f"{where}: row {k + 1}, column t: time {self.t[k]!r} s is not "
+                             f"after the previous {self.t[k - 1]!r} s (t must increase)")
+        self.angle = np.unwrap(self.angle.astype(float))
+        self.eta_unwrapped = unwrap_eta(self.angle, self.eta, self.phi_a, self.phi_d, self.q)
+        self.activations = find_activations(self)
+        self.coasts = find_coasts(self)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+    @property
+    def sample_time(self) -> float:
+        """Median sample interval [s]."""
+        return float(np.median(np.diff(self.t)))
+
+    def slice(self, a: int, b: int, name: str | None = None) -> "Trial":
+        """Samples [a, b) as a trial of its own."""
+        return Trial(name or f"{self.name}[{a}:{b}]", self.t[a:b], self.angle[a:b], self.q[a:b],
+                     self.eta[a:b], self.n_a[a:b], self.phi_a[a:b], self.phi_d[a:b],
+                     None if self.speed is None else self.speed[a:b], self.source)
+
+
+def unwrap_eta(angle: np.ndarray, eta: np.ndarray, phi_a: np.ndarray, phi_d: np.ndarray,
+               q: np.ndarray) -> np.ndarray:
+    """Unwrapped sector N = eta + 16 k (n,) nearest to where the contact happens.
+
+    While an actuator is on its contact angle xi1 - N pi/8 lies between phi_a and phi_d
+    (within +-pi/8), so N is the multiple that puts the window's middle nearest the angle.
+    """
+    mid = np.where(np.isfinite(phi_a) & np.isfinite(phi_d), 0.5 * (phi_a + phi_d), 0.0)
+    sector = (angle - mid) / SECTOR
+    k = np.round((sector - eta) / N_ACTUATORS)
+    return (eta + N_ACTUATORS * k).astype(np.int64)
+
+
+def find_activations(tr: Trial) -> list[Activation]:
+    """Runs of q = 1 with the pad and the angles of their first sample."""
+    q = tr.q.astype(bool)
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], q, [False])).astype(np.int8)))
+    out = []
+    for a, b in zip(edges[::2], edges[1::2]):
+        pa, pd = float(tr.phi_a[a]), float(tr.phi_d[a])
+        if not (math.isfinite(pa) and math.isfinite(pd)):
+            raise TrialError(f"{tr.source or tr.name}: row {a + 2}: q = 1 but phi_a / phi_d are "
+                             f"empty; an active actuator needs the angles it was commanded with")
+        out.append(Activation(int(a), int(b), int(tr.eta_unwrapped[a]), pa, pd))
+    return out
+
+
+def find_coasts(tr: Trial, min_duration: float = MIN_COAST) -> list[tuple[int, int]]:
+    """Coast-down segments [a, b): nothing scheduled (n_a = -1), nothing on, wheel moving."""
+    idle = (tr.n_a < 0) & (tr.q == 0)
+    edges = np.flatnonzero(np.diff(np.concatenate(([False], idle, [False])).astype(np.int8)))
+    out = []
+    for a, b in zip(edges[::2], edges[1::2]):
+        # stop where the wheel stands still (no count change for 0.2 s)
+        moving = np.flatnonzero(np.abs(np.diff(tr.angle[a:b])) > 0)
+        if moving.size == 0:
+            continue
+        last = a + int(moving[-1]) + 1
+        if tr.t[last] - tr.t[a] >= min_duration:
+            out.append((int(a), int(last)))
+    return out
+
+
+# -- CSV --------------------------------------------------------------------------------------
+def read_csv(path: str | Path) -> Trial:
+    """Read one trial from a CSV file with a header row (columns in any order).
+
+    Columns: t [s], angle [rad], q (0/1), eta (0..15), n_a (0..15, or -1 when no actuator is
+    scheduled), phi_a [rad], phi_d [rad] (empty when n_a = -1), optional speed [rad/s].
+    Raises :class:`TrialError` naming the row (1 = header) and column at fault.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise TrialError(f"{path}: cannot read: {exc.strerror}") from None
+    rows = list(csv.reader(text.splitlines()))
+    if not rows:
+        raise TrialError(f"{path}: empty file; expected a header row with {list(CSV_REQUIRED)}")
+    header = [h.strip() for h in rows[0]]
+    missing = [c for c in CSV_REQUIRED if c not in header]
+    if missing:
+        raise TrialError(f"{path}: row 1 (header): missing column(s) {missing}; found {header}; "
+                         f"expected {list(CSV_REQUIRED)} plus optional {list(CSV_OPTIONAL)}")
+    unknown = [h for h in header if h not in CSV_REQUIRED + CSV_OPTIONAL]
+    if unknown:
+        raise TrialError(f"{path}: row 1 (header): unknown column(s) {unknown}; expected "
+                         f"{list(CSV_REQUIRED)} plus optional {list(CSV_OPTIONAL)}")
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise TrialError(f"{path}: row 1 (header): column(s) {dup} appear more than once")
+    col = {h: i for i, h in enumerate(header)}
+    cols = [c for c in CSV_REQUIRED + CSV_OPTIONAL if c in col]
+    data = {c: [] for c in cols}
+    for r, row in enumerate(rows[1:], start=2):
+        if not row or all(not x.strip() for x in row):
+            continue
+        if len(row) != len(header):
+            raise TrialError(f"{path}: row {r}: {len(row)} fields, the header has {len(header)}")
+        vals = {c: row[col[c]].strip() for c in cols}
+        scheduled = True
+        for c in cols:
+            v = vals[c]
+            where = f"{path}: row {r}, column {c}"
+            if c in ("q", "eta", "n_a"):
+                try:
+                    x = int(float(v))
+                    if x != float(v):
+                        raise ValueError
+                except ValueError:
+                    raise TrialError(f"{where}: {v!r} is not an integer") from None
+                lo, hi = {"q": (0, 1), "eta": (0, 15), "n_a": (-1, 15)}[c]
+                if not lo <= x <= hi:
+                    raise TrialError(f"{where}: {x} is outside {lo}..{hi}")
+                if c == "n_a":
+                    scheduled = x >= 0
+                data[c].append(x)
+                continue
+            if v == "" and c in ("phi_a", "phi_d", "speed"):
+                data[c].append(math.nan)
+                continue
+            try:
+                x = float(v)
+            except ValueError:
+                raise TrialError(f"{where}: {v!r} is not a number") from None
+            if not math.isfinite(x):
+                raise TrialError(f"{where}: {v!r} is not finite")
+            if c in ("phi_a", "phi_d") and abs(x) > SECTOR + 1e-9:
+                raise TrialError(f"{where}: {x!r} rad is outside [-pi/8, pi/8] (did you write "
+                                 f"degrees? angles are in radians)")
+            data[c].append(x)
+        if scheduled and (math.isnan(data["phi_a"][-1]) or math.isnan(data["phi_d"][-1])):
+            raise TrialError(f"{path}: row {r}, column phi_a/phi_d: empty although n_a = "
+                             f"{data['n_a'][-1]} schedules an actuator")
+        if data["q"][-1] == 1 and not scheduled and math.isnan(data["phi_a"][-1]):
+            raise TrialError(f"{path}: row {r}, column n_a: -1 (nothing scheduled) but q = 1 "
+                             f"and no phi_a / phi_d for the active actuator")
+    if len(data["t"]) < 30:
+        raise TrialError(f"{path}: {len(data['t'])} data rows; a trial needs at least 30")
+    a = {c: np.asarray(v, dtype=float) for c, v in data.items()}
+    return Trial(path.stem, a["t"], a["angle"], a["q"].astype(np.int8), a["eta"].astype(np.int64),
+                 a["n_a"].astype(np.int64), a["phi_a"], a["phi_d"], a.get("speed"), str(path))
+
+
+def write_csv(trial: Trial, path: str | Path) -> None:
+    """Write a trial in the CSV format :func:`read_csv` reads (nan angles as empty fields)."""
+    cols = list(CSV_REQUIRED) + (["speed"] if trial.speed is not None else [])
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(cols)
+        for k in range(trial.t.shape[0]):
+            row = [repr(float(trial.t[k])), repr(float(trial.angle[k])), int(trial.q[k]),
+                   int(trial.eta[k]), int(trial.n_a[k])]
+            row += ["" if math.isnan(x) else repr(float(x)) for x in (trial.phi_a[k], trial.phi_d[k])]
+            if trial.speed is not None:
+                row.append(repr(float(trial.speed[k])))
+            w.writerow(row)
+
+
+# -- bags -------------------------------------------------------------------------------------
+def read_bag(path: str | Path) -> list[Trial]:
+    """Trials from a bag: one per namespace that has ``telemetry`` (and ``command``) topics.
+
+    The command in effect at each sample is the one whose sequence number the telemetry
+    reports as latched (``last_command_sequence``), else the latest one recorded at or before
+    the sample; samples before any command, or with HV off, have n_a = -1.
+    """
+    from hasel_wheel_driver import bagio, topics
+
+    tel: dict[str, list] = {}
+    cmds: dict[str, dict[int, tuple[int, float, float]]] = {}
+    timed: dict[str, list[tuple[float, int, float, float]]] = {}
+    tel_suffix = "/" + topics.TELEMETRY.name
+    cmd_suffix = "/" + topics.COMMAND.name
+    for topic, _t, m in bagio.read_messages(path):
+        if topic.endswith(tel_suffix):
+            ns = topic[: -len(tel_suffix)]
+            tel.setdefault(ns, []).append((m.device_time_us * 1e-6, m.angle, m.q, m.eta,
+                                           m.last_command_sequence, m.hv_monitor))
+        elif topic.endswith(cmd_suffix):
+            ns = topic[: -len(cmd_suffix)]
+            cmds.setdefault(ns, {})[int(m.sequence)] = (int(m.n_a), float(m.phi_a), float(m.phi_d))
+            timed.setdefault(ns, []).append((_t * 1e-9, int(m.n_a), float(m.phi_a),
+                                             float(m.phi_d)))
+    if not tel:
+        raise TrialError(f"{path}: no telemetry topic (…/{topics.TELEMETRY.name}) in this bag")
+    out = []
+    for ns, rows in sorted(tel.items()):
+        arr = np.asarray(rows, dtype=float)
+        table = cmds.get(ns, {})
+        n_a = np.full(len(rows), -1, dtype=np.int64)
+        pa = np.full(len(rows), math.nan)
+        pd = np.full(len(rows), math.nan)
+        # a command the firmware's own schedule latched carries no host sequence number:
+        # then the latest command recorded at or before the sample stands
+        by_time = sorted(timed.get(ns, []))
+        times = np.array([c[0] for c in by_time])
+        for k, seq in enumerate(arr[:, 4].astype(np.int64)):
+            if arr[k, 5] <= 0.0:                     # HV off: nothing scheduled
+                continue
+            if seq in table:
+                n_a[k], pa[k], pd[k] = table[seq]
+            elif times.size:
+                i = int(np.searchsorted(times, arr[k, 0] + 1e-9, side="right")) - 1
+                if i >= 0:
+                    n_a[k], pa[k], pd[k] = by_time[i][1:]
+        name = (Path(path).name + ns.replace("/", "_")) if ns else Path(path).name
+        out.append(Trial(name, arr[:, 0], arr[:, 1], arr[:, 2].astype(np.int8),
+                         arr[:, 3].astype(np.int64), n_a, pa, pd, None, f"{path}{ns or ''}"))
+    return out
+
+
+def load_trials(paths: list[str | Path]) -> list[Trial]:
+    """Trials from CSV files, bag directories or .mcap files (a bag may hold several)."""
+    out: list[Trial] = []
+    for p in paths:
+        p = Path(p)
+        if p.suffix.lower() == ".csv":
+            out.append(read_csv(p))
+        elif p.is_dir() or p.suffix.lower() == ".mcap":
+            out.extend(read_bag(p))
+        else:
+            raise TrialError(f"{p}: not a .csv file, a bag directory or a .mcap file")
+    names = [t.name for t in out]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise TrialError(f"trial names must be unique, got {dup} more than once")
+    return out

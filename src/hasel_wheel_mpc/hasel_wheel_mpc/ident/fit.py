@@ -1,0 +1,487 @@
+"""Fitting the hybrid model to trials: friction from coast-downs, then the force law (and any
+candidate effects) by multiple-shooting least squares, with uncertainty.
+
+Parameterisation.  F_a depends on sigma6 / (sigma2 |xi2| + sigma3), so only two ratios of
+(sigma2, sigma3, sigma6) are determined by data (model-notes.md).  There is a second
+degeneracy the notes do not list: with u = ln(contact angle), the bump's exponent
+-sigma1 u - (u - sigma4)^2 / sigma5^2 plus ln(sigma6) is a quadratic in u, which has three
+coefficients, while (sigma1, sigma4, sigma5, sigma6) are four.  So sigma1 cannot be told from a
+shift of sigma4 with a rescaling of sigma6.  The fit therefore uses the coordinates that the
+data does determine (:func:`force_coordinates`):
+
+    peak, centre, width (= |sigma5|), b = sigma2 / sigma3, tau_f
+    (+ brake_gain when the data holds braking activations, + each candidate's parameters)
+
+and maps back with sigma1 and sigma3 held at their reference values.
+:func:`~.identify.identifiability` shows, from the data's own Jacobian in the paper's
+parameters, which directions are determined and which are not.
+
+Objective.  Each trial is cut into windows of ``window`` seconds; each window starts from its
+own (xi1, xi2), fitted along with the parameters (multiple shooting).  The residual is the
+simulated minus the measured angle [rad] at every sample, with the measured switching
+(:func:`~.simulate.shoot`).  The window starts are solved for inside every evaluation
+(variable projection: Gauss-Newton on all windows at once), so scipy's trust-region least
+squares sees only the shared parameters, with the window starts projected out of its
+Jacobian (Kaufman).  It runs to convergence (``ftol = xtol = 1e-10``), not to an iteration
+limit.  The same projected Jacobian gives the covariance with the starts marginalised.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize, stats
+
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.model import N_ACTUATORS, param_vector
+from hasel_wheel_sim.params import WheelParams
+
+from .candidates import Candidate, ParamSpec
+from .data import Trial
+from .simulate import retention_charge, shoot
+
+#: Glitch rejection: a sample further than this from the line through its neighbours [rad].
+GLITCH = 0.05
+
+
+def force_coordinates(p: WheelParams) -> dict[str, float]:
+    """The force law's identifiable coordinates (see the module docstring).
+
+    peak = sigma6/sigma3 * exp((centre^2 - sigma4^2) / sigma5^2)   force scale at the bump's top
+    centre = sigma4 - sigma1 sigma5^2 / 2                           ln(contact angle [rad]) there
+    width = |sigma5|, b = sigma2 / sigma3 [s/rad]
+    """
+    s2 = p.sigma5 ** 2
+    c = p.sigma4 - p.sigma1 * s2 / 2.0
+    return {"peak": p.sigma6 / p.sigma3 * math.exp((c * c - p.sigma4 ** 2) / s2), "centre": c,
+            "width": abs(p.sigma5), "b": p.sigma2 / p.sigma3}
+
+
+def from_force_coordinates(base: WheelParams, peak: float, centre: float, width: float,
+                           b: float, **other: float) -> WheelParams:
+    """WheelParams with the force law given by its coordinates; sigma1 and sigma3 stay at
+    ``base`` (the data cannot move them independently)."""
+    s2 = width * width
+    sigma4 = centre + base.sigma1 * s2 / 2.0
+    k = peak * math.exp((sigma4 ** 2 - centre ** 2) / s2)
+    return base.with_values(sigma2=b * base.sigma3, sigma4=sigma4,
+                            sigma5=math.copysign(width, base.sigma5), sigma6=k * base.sigma3,
+                            **other)
+
+
+def nominal_specs(base: WheelParams, brake: bool) -> tuple[ParamSpec, ...]:
+    """The nominal model's fitted parameters (see the module docstring)."""
+    c = force_coordinates(base)
+    out = (
+        ParamSpec("peak", "1", c["peak"], 1e-3, 1e4, 0.1 * c["peak"]),
+        ParamSpec("centre", "1", c["centre"], -3.0, 0.0, 0.01),
+        ParamSpec("width", "1", c["width"], 0.01, 2.0, 0.01),
+        ParamSpec("b", "s/rad", c["b"], 0.0, 10.0, 0.1),
+        ParamSpec("tau_f", "N*m", base.tau_f, 1e-5, 1.0, 1e-3),
+    )
+    if brake:
+        out += (ParamSpec("brake_gain", "1", base.brake_gain, 0.01, 100.0, 0.1),)
+    return out
+
+
+# -- friction from coast-downs ----------------------------------------------------------------
+@dataclass
+class FrictionEstimate:
+    """tau_f [N*m] with its 95 % interval, from ``segments`` coast-downs."""
+
+    tau_f: float
+    ci95: tuple[float, float]
+    segments: int
+    per_segment: list[float]
+
+
+def coastdown_friction(trials: list[Trial], base: WheelParams) -> FrictionEstimate | None:
+    """tau_f from every coast-down: angle = a + b t - alpha t^2 / 2 fitted by least squares.
+
+    Coulomb friction alone decelerates at alpha = (r + L)/L tau_f / (J/L) (eq. (38)), so
+    tau_f = alpha (J/L) L / (r + L).  Segments are weighted by their information (t^4 n);
+    the interval combines the regression's own error with the scatter between segments.
+    None when the trials hold no coast-down.
+    """
+    est, var = [], []
+    for tr in trials:
+        for a, b in tr.coasts:
+            t = tr.t[a:b] - tr.t[a]
+            y = tr.angle[a:b]
+            ok = clean_mask(t, y)
+            X = np.column_stack([np.ones(ok.sum()), t[ok], -0.5 * t[ok] ** 2])
+            coef, res, *_ = np.linalg.lstsq(X, y[ok], rcond=None)
+            dof = max(ok.sum() - 3, 1)
+            s2 = float(res[0]) / dof if res.size else 0.0
+            cov = s2 * np.linalg.inv(X.T @ X)
+            factor = base.inertia * base.L / (base.r + base.L)
+            est.append(coef[2] * factor)
+            var.append(cov[2, 2] * factor ** 2)
+    if not est:
+        return None
+    e, v = np.asarray(est), np.maximum(np.asarray(var), 1e-30)
+    w = 1.0 / v
+    mean = float(np.sum(w * e) / np.sum(w))
+    se = math.sqrt(1.0 / np.sum(w))
+    if e.size > 1:   # scatter between segments beyond what the regressions expect
+        chi2 = float(np.sum(w * (e - mean) ** 2)) / (e.size - 1)
+        se *= math.sqrt(max(chi2, 1.0))
+        q = stats.t.ppf(0.975, e.size - 1)
+    else:
+        q = 1.96
+    return FrictionEstimate(mean, (mean - q * se, mean + q * se), int(e.size), [float(x) for x in e])
+
+
+def clean_mask(t: np.ndarray, y: np.ndarray, tol: float = GLITCH) -> np.ndarray:
+    """False at isolated glitches: samples off the line through both neighbours by > tol [rad]."""
+    ok = np.ones(y.shape[0], dtype=bool)
+    if y.shape[0] < 3:
+        return ok
+    w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+    line = y[:-2] + w * (y[2:] - y[:-2])
+    ok[1:-1] = np.abs(y[1:-1] - line) <= tol
+    return ok
+
+
+# -- the multiple-shooting problem ---------------------------------------------------------------
+@dataclass
+class FitResult:
+    """Outcome of one fit; ``values`` and ``ci95`` are keyed by parameter name."""
+
+    names: list[str]
+    units: list[str]
+    theta: np.ndarray                 # shared parameters (g,)
+    z: np.ndarray                     # everything fitted, shared then window starts
+    cov: np.ndarray                   # (g, g) covariance of theta (nuisance marginalised)
+    rmse: float                       # angle residual RMS [rad] over all used samples
+    per_trial_rmse: dict[str, float]
+    nfev: int
+    converged: bool
+    message: str
+    inflation: float                  # variance inflation for residual autocorrelation
+    candidates: tuple[str, ...] = ()
+    params: WheelParams | None = None
+    values: dict[str, float] = field(default_factory=dict)
+    ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+class Problem:
+    """Multiple-shooting least squares over a set of trials (see the module docstring).
+
+    ``candidates`` extend the nominal model; ``fixed`` pins shared parameters by name
+    (e.g. tau_f from the coast-downs).  Arrays of all trials are concatenated; windows never
+    cross a trial boundary.
+    """
+
+    def __init__(self, trials: list[Trial], base: WheelParams | None = None,
+                 candidates: tuple[Candidate, ...] = (), window: float = 1.0,
+                 fixed: dict[str, float] | None = None) -> None:
+        if not trials:
+            raise ValueError("identification needs at least one trial")
+        self.trials = [at_rest_trimmed(t) for t in trials]
+        self.base = base or WheelParams()
+        self.candidates = tuple(candidates)
+        brake = any(a.phi_a < 0 for tr in trials for a in tr.activations)
+        self.n_nominal = len(nominal_specs(self.base, brake))
+        self.specs = nominal_specs(self.base, brake) + tuple(p for c in candidates for p in c.params)
+        self.fixed = dict(fixed or {})
+        self.free = [i for i, p in enumerate(self.specs) if p.name not in self.fixed]
+        self.window = window
+        self._concat()
+
+    # -- layout -------------------------------------------------------------------------------
+    def _concat(self) -> None:
+        ts, ys, qs, es, pas, ots, oks, starts, owner = [], [], [], [], [], [], [], [], []
+        n = 0
+        self.trial_slices: list[slice] = []
+        self.trial_windows: list[range] = []
+        for j, tr in enumerate(self.trials):
+            m = tr.t.shape[0]
+            on_time = np.zeros(m)
+            for act in tr.activations:
+                on_time[act.start:act.stop] = tr.t[act.start:act.stop] - tr.t[act.start]
+            ts.append(tr.t)
+            ys.append(tr.angle)
+            qs.append(tr.q.astype(float))
+            es.append(tr.eta_unwrapped.astype(float))
+            pas.append(np.where(tr.q == 1, np.nan_to_num(tr.phi_a), 0.0))
+            ots.append(on_time)
+            oks.append(clean_mask(tr.t, tr.angle))
+            w0 = len(starts)
+            k = 0
+            while k < m - 1:
+                kk = int(np.searchsorted(tr.t, tr.t[k] + self.window))
+                if m - kk < 0.5 * self.window / tr.sample_time:   # a short tail joins
+                    kk = m
+                starts.append(n + k)
+                owner.append(j)
+                k = kk
+            self.trial_windows.append(range(w0, len(starts)))
+            self.trial_slices.append(slice(n, n + m))
+            n += m
+        self.t = np.concatenate(ts)
+        self.y = np.concatenate(ys)
+        self.q = np.concatenate(qs)
+        self.eta = np.concatenate(es)
+        self.phi_a = np.concatenate(pas)
+        self.on_time = np.concatenate(ots)
+        self.ok = np.concatenate(oks)
+        self.pad = (np.concatenate(es).astype(np.int64) % N_ACTUATORS)
+        self.starts = np.asarray(starts + [n], dtype=np.int64)
+        self.window_trial = np.asarray(owner)
+        self.n = n
+        self._out1 = np.zeros(n)
+        self._out2 = np.zeros(n)
+        self._charge_cache: dict[float, np.ndarray] = {}
+
+    @property
+    def n_windows(self) -> int:
+        return self.starts.shape[0] - 1
+
+    @property
+    def names(self) -> list[str]:
+        return [self.specs[i].name for i in self.free]
+
+    # -- parameters -> model ------------------------------------------------------------------
+    def full_theta(self, theta_free: np.ndarray) -> np.ndarray:
+        full = np.array([self.fixed.get(p.name, p.start) for p in self.specs], dtype=float)
+        full[self.free] = theta_free
+        return full
+
+    def wheel_params(self, full: np.ndarray) -> WheelParams:
+        other = {"tau_f": full[4]}
+        if self.n_nominal > 5:
+            other["brake_gain"] = full[5]
+        return from_force_coordinates(self.base, full[0], full[1], full[2], full[3], **other)
+
+    def model(self, full: np.ndarray) -> tuple[np.ndarray, dict]:
+        """(parameter vector, extra) of the model with all shared parameters ``full``."""
+        pv = param_vector(self.wheel_params(full))
+        extra: dict = {}
+        i = self.n_nominal
+        for c in self.candidates:
+            c.apply(full[i:i + c.size], pv, extra)
+            i += c.size
+        return pv, extra
+
+    def gains(self, pv: np.ndarray) -> np.ndarray:
+        """Force multiplier of the active actuator at every sample (spread x retention)."""
+        g = pv[L.P_GAINS + self.pad]
+        rate = pv[L.P_RET_RATE]
+        if rate > 0.0:
+            rec = float(pv[L.P_RET_RECOVERY])
+            charge = self._charge_cache.get(rec)
+            if charge is None:
+                charge = np.concatenate([retention_charge(self.t[s], self.q[s].astype(np.int64),
+                                                          self.pad[s], rec)
+                                         for s in self.trial_slices])
+                if len(self._charge_cache) > 64:
+                    self._charge_cache.clear()
+                self._charge_cache[rec] = charge
+            g = g * np.exp(-rate * charge)
+        return g
+
+    # -- simulation and residual ----------------------------------------------------------------
+    def simulate(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Simulated (xi1, xi2) at every sample for the packed vector z."""
+        g = len(self.free)
+        pv, extra = self.model(self.full_theta(z[:g]))
+        x0 = z[g:].reshape(-1, 2)
+        eta = self.eta + extra.get("eta_offset", 0.0)
+        shoot(self.t, self.q, eta, self.phi_a, self.on_time, self.gains(pv), self.starts, x0, pv,
+              self._out1, self._out2)
+        return self._out1, self._out2
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        x1, _ = self.simulate(z)
+        return np.where(self.ok, x1 - self.y, 0.0)
+
+    def initial_starts(self) -> np.ndarray:
+        """(w, 2) window starts from a line through the first 0.1 s of each window."""
+        x0 = np.zeros((self.n_windows, 2))
+        for w in range(self.n_windows):
+            a, e = self.starts[w], self.starts[w + 1]
+            b = max(min(a + int(np.searchsorted(self.t[a:e], self.t[a] + 0.1)), e), a + 2)
+            ok = self.ok[a:b]
+            p = np.polyfit(self.t[a:b][ok] - self.t[a], self.y[a:b][ok], 1)
+            x0[w] = (p[1], max(p[0], 0.0))
+        return x0
+
+    def _shoot(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray,
+               x0: np.ndarray) -> np.ndarray:
+        shoot(self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts, x0, pv,
+              self._out1, self._out2)
+        return np.where(self.ok, self._out1 - self.y, 0.0)
+
+    def _window_sums(self, v: np.ndarray) -> np.ndarray:
+        return np.add.reduceat(v, self.starts[:-1])
+
+    def _normal(self, d1: np.ndarray, d2: np.ndarray):
+        a11, a12, a22 = (self._window_sums(d1 * d1), self._window_sums(d1 * d2),
+                         self._window_sums(d2 * d2))
+        det = a11 * a22 - a12 * a12
+        return a11, a12, a22, np.where(np.abs(det) > 1e-30, det, np.inf)
+
+    def solve_starts(self, full: np.ndarray, x0: np.ndarray, iterations: int = 12
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Best window starts for the shared parameters ``full`` (Gauss-Newton, every window at
+        once: a window's residuals depend on its own start only).
+
+        Returns (x0 (w, 2), residual (n,), d residual / d xi1_0 (n,), d residual / d xi2_0 (n,)).
+        """
+        pv, extra = self.model(full)
+        eta = self.eta + extra.get("eta_offset", 0.0)
+        gains = self.gains(pv)
+        x0 = x0.copy()
+        h1, h2 = 1e-6, 1e-6
+        for _ in range(iterations):
+            r = self._shoot(pv, eta, gains, x0)
+            d1 = (self._shoot(pv, eta, gains, x0 + [h1, 0.0]) - r) / h1
+            d2 = (self._shoot(pv, eta, gains, x0 + [0.0, h2]) - r) / h2
+            a11, a12, a22, det = self._normal(d1, d2)
+            g1, g2 = self._window_sums(d1 * r), self._window_sums(d2 * r)
+            step = np.column_stack([-(a22 * g1 - a12 * g2) / det, -(a11 * g2 - a12 * g1) / det])
+            x0 += step
+            np.maximum(x0[:, 1], 0.0, out=x0[:, 1])     # the wheel rolls forwards (or rests)
+            # far below the encoder's resolution (6 mrad): more digits change no residual
+            if np.max(np.abs(step[:, 0])) < 1e-7 and np.max(np.abs(step[:, 1])) < 1e-6:
+                break
+        r = self._shoot(pv, eta, gains, x0)
+        return x0, r, d1, d2
+
+    def _project(self, J: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
+        """Remove from each column of J (n, g) the part that the window starts can explain."""
+        a11, a12, a22, det = self._normal(d1, d2)
+        win = np.repeat(np.arange(self.n_windows), np.diff(self.starts))
+        out = J.copy()
+        for j in range(J.shape[1]):
+            g1, g2 = self._window_sums(d1 * J[:, j]), self._window_sums(d2 * J[:, j])
+            c1 = (a22 * g1 - a12 * g2) / det
+            c2 = (a11 * g2 - a12 * g1) / det
+            out[:, j] -= c1[win] * d1 + c2[win] * d2
+        return out
+
+    # -- fitting ------------------------------------------------------------------------------
+    def fit(self, start: dict[str, float] | None = None, x0: np.ndarray | None = None,
+            max_nfev: int = 100) -> FitResult:
+        """Least squares to convergence (variable projection: the window starts are solved
+        for inside every evaluation).  ``start`` overrides start values by name, ``x0`` gives
+        window starts (w, 2)."""
+        start = start or {}
+        th = np.array([start.get(self.specs[i].name, self.specs[i].start) for i in self.free])
+        lo = np.array([self.specs[i].lower for i in self.free])
+        hi = np.array([self.specs[i].upper for i in self.free])
+        th = np.clip(th, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+        scale = np.array([self.specs[i].scale for i in self.free])
+        # window starts are warm-started from those of the best evaluation so far, so a trial
+        # step far off (which the trust region then rejects) cannot spoil later evaluations
+        state = {"x0": self.initial_starts() if x0 is None else x0.copy(), "key": None,
+                 "best": math.inf}
+        best = {"x0": state["x0"]}
+
+        def evaluate(theta):
+            key = theta.tobytes()
+            if state["key"] != key:
+                x, r, d1, d2 = self.solve_starts(self.full_theta(theta), best["x0"])
+                state.update(key=key, x0=x, r=r, d1=d1, d2=d2)
+                cost = float(r @ r)
+                if cost < state["best"]:
+                    state["best"] = cost
+                    best["x0"] = x
+            return state
+
+        def fun(theta):
+            return evaluate(theta)["r"].copy()
+
+        def jac(theta):
+            st = evaluate(theta)
+            r, x = st["r"].copy(), st["x0"]
+            J = np.empty((self.n, theta.size))
+            for j in range(theta.size):
+                h = 1e-6 * max(abs(theta[j]), scale[j])
+                if theta[j] + h > hi[j]:
+                    h = -h
+                tp = theta.copy()
+                tp[j] += h
+                pv, extra = self.model(self.full_theta(tp))
+                J[:, j] = (self._shoot(pv, self.eta + extra.get("eta_offset", 0.0),
+                                       self.gains(pv), x) - r) / h
+            return self._project(J, st["d1"], st["d2"])
+
+        if th.size:
+            sol = optimize.least_squares(fun, th, jac=jac, bounds=(lo, hi), x_scale=scale,
+                                         method="trf", ftol=1e-10, xtol=1e-10, gtol=1e-10,
+                                         max_nfev=max_nfev)
+            theta, nfev, ok, msg = sol.x, sol.nfev, sol.status > 0, sol.message
+            J = jac(theta)
+        else:
+            theta, nfev, ok, msg, J = th, 1, True, "nothing to fit", np.zeros((self.n, 0))
+        st = evaluate(theta)
+        return self._result(theta, st["x0"], st["r"], J, nfev, ok, msg)
+
+    def _result(self, theta, x0, r, J, nfev, converged, message) -> FitResult:
+        g = theta.size
+        used = self.ok
+        n_used = int(used.sum())
+        dof = max(n_used - g - 2 * self.n_windows, 1)
+        s2 = float(r @ r) / dof
+        inflation = autocorrelation_inflation(r, self.starts, used)
+        cov = np.linalg.pinv(J.T @ J, rcond=1e-12) * s2 * inflation if g else np.zeros((0, 0))
+        full = self.full_theta(theta)
+        names = self.names
+        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        q = stats.norm.ppf(0.975)
+        per_trial = {}
+        for tr, s in zip(self.trials, self.trial_slices):
+            rr = r[s][used[s]]
+            per_trial[tr.name] = float(np.sqrt(np.mean(rr ** 2)))
+        return FitResult(
+            names=names, units=[self.specs[i].unit for i in self.free], theta=theta.copy(),
+            z=np.concatenate([theta, x0.ravel()]), cov=cov,
+            rmse=float(np.sqrt(np.sum(r ** 2) / n_used)), per_trial_rmse=per_trial,
+            nfev=int(nfev), converged=bool(converged), message=str(message),
+            inflation=float(inflation), candidates=tuple(c.id for c in self.candidates),
+            params=self.wheel_params(full),
+            values={n: float(v) for n, v in zip(names, theta)},
+            ci95={n: (float(v - q * s), float(v + q * s)) for n, v, s in zip(names, theta, sd)})
+
+    def window_starts(self, z: np.ndarray) -> np.ndarray:
+        return z[len(self.free):].reshape(-1, 2)
+
+
+def at_rest_trimmed(tr: Trial, band: float = 0.015) -> Trial:
+    """The trial without its tail at rest: from where the angle stays within ``band`` [rad]
+    (two encoder counts plus noise) to the end.  A stopped wheel tells nothing about the
+    parameters, and the speed it starts a window with is not determined."""
+    rev = tr.angle[::-1]
+    spread = np.maximum.accumulate(rev) - np.minimum.accumulate(rev)
+    still = int(np.argmax(spread > band))        # samples at the end within the band
+    last = tr.t.shape[0] - still + 1
+    if still <= 1 or last >= tr.t.shape[0] or last < 30:
+        return tr
+    return tr.slice(0, last, tr.name)
+
+
+def autocorrelation_inflation(r: np.ndarray, starts: np.ndarray, used: np.ndarray,
+                              max_lag: int = 30) -> float:
+    """1 + 2 sum_{l=1..max_lag} rho_l: how much a correlated residual widens the intervals.
+
+    Least-squares intervals assume independent residuals.  A 10-bit encoder sampled at 300 Hz
+    aliases its count steps into a slow sawtooth, so neighbouring residuals are correlated
+    and carry less information than their number suggests.  The sum of the residual's
+    autocorrelations (inside windows, up to ``max_lag`` samples) is the factor by which the
+    variance of a slowly varying projection of it grows.  Never below 1.
+    """
+    num = np.zeros(max_lag + 1)
+    for w in range(starts.shape[0] - 1):
+        a, b = starts[w], starts[w + 1]
+        rr = np.where(used[a:b], r[a:b], 0.0)
+        rr = rr - rr.mean()
+        m = rr.shape[0]
+        for lag in range(min(max_lag, m - 1) + 1):
+            num[lag] += float(rr[lag:] @ rr[:m - lag])
+    if num[0] <= 0.0:
+        return 1.0
+    rho = num[1:] / num[0]
+    return float(max(1.0 + 2.0 * np.sum(rho), 1.0))

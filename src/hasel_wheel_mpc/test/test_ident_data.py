@@ -1,0 +1,119 @@
+"""Identification inputs: CSV import with clear errors, bags, activations and coast-downs;
+friction from coast-downs against the closed form."""
+import math
+
+import numpy as np
+import pytest
+
+from hasel_wheel_mpc.ident import data as D
+from hasel_wheel_mpc.ident import fit as F
+from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.recorder import Recorder
+from hasel_wheel_mpc.trials import TrialSpec, run_trial
+from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.plant import PlantConfig
+
+ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.001, "unit": "rad"}}}
+
+
+@pytest.fixture(scope="module")
+def trial():
+    """A short open-loop trial with a coast-down, through the 10-bit encoder."""
+    cfg = PlantConfig(seed=2, switching="tick", effects=effects_from_mapping(ENCODER))
+    return S.record(S.SyntheticTrial(math.radians(3.0), drive=12.0, coast=8.0), config=cfg)
+
+
+def test_activations_follow_the_pads_and_coast_is_found(trial):
+    acts = trial.activations
+    assert len(acts) > 50
+    # sequential schedule: every activation is on the next pad, inside its angle window
+    assert all(b.eta == a.eta + 1 for a, b in zip(acts[6:], acts[7:]))
+    for a in acts[10:]:
+        xc = trial.angle[a.start] - a.eta * math.pi / 8
+        assert a.phi_a - 0.03 < xc < a.phi_d + 0.03
+    (c0, c1), = trial.coasts
+    assert trial.t[c0] == pytest.approx(12.0, abs=0.01) and trial.t[c1] - trial.t[c0] > 3.0
+
+
+def test_csv_round_trip_keeps_every_value(tmp_path, trial):
+    p = tmp_path / "trial.csv"
+    D.write_csv(trial, p)
+    back = D.read_csv(p)
+    np.testing.assert_array_equal(back.t, trial.t)
+    np.testing.assert_array_equal(back.angle, trial.angle)
+    np.testing.assert_array_equal(back.q, trial.q)
+    np.testing.assert_array_equal(back.n_a, trial.n_a)
+    np.testing.assert_array_equal(np.isnan(back.phi_a), np.isnan(trial.phi_a))
+    assert [(a.start, a.eta) for a in back.activations] == [(a.start, a.eta) for a in trial.activations]
+
+
+def test_csv_columns_in_any_order_and_wrapped_angles(tmp_path, trial):
+    p = tmp_path / "shuffled.csv"
+    D.write_csv(trial, p)
+    lines = p.read_text().splitlines()
+    rows = [ln.split(",") for ln in lines]
+    order = [6, 2, 0, 5, 1, 4, 3]
+    wrapped = []
+    for i, r in enumerate(rows):
+        if i:   # wrap the angle into [0, 2 pi) as an absolute encoder reports it
+            r[1] = repr(float(r[1]) % (2 * math.pi))
+        wrapped.append(",".join(r[j] for j in order))
+    p.write_text("\n".join(wrapped) + "\n")
+    back = D.read_csv(p)
+    np.testing.assert_allclose(back.angle, trial.angle, atol=1e-9)
+    assert len(back.activations) == len(trial.activations)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda h, r: (h.replace("phi_d", "phi_x"), r), r"row 1 \(header\): missing column\(s\) \['phi_d'\]"),
+    (lambda h, r: (h, r[:3] + ["0.1,abc" + r[3][r[3].index(",", r[3].index(",") + 1):]] + r[4:]),
+     r"row 5, column angle: 'abc' is not a number"),
+    (lambda h, r: (h, r[:5] + [r[5].replace(",0,", ",7,", 1)] + r[6:]), r"row 7, column q: 7 is outside 0\.\.1"),
+    (lambda h, r: (h, r[:2] + [r[5]] + r[3:]), r"row 4, column t: .* is not after"),
+])
+def test_bad_csv_names_row_and_column(tmp_path, trial, edit, match):
+    p = tmp_path / "bad.csv"
+    D.write_csv(trial.slice(0, 100), p)
+    header, *rows = p.read_text().splitlines()
+    header, rows = edit(header, rows)
+    p.write_text("\n".join([header] + rows) + "\n")
+    with pytest.raises(D.TrialError, match=match):
+        D.read_csv(p)
+
+
+def test_degrees_instead_of_radians_is_named(tmp_path, trial):
+    p = tmp_path / "deg.csv"
+    tr = trial.slice(0, 100)
+    tr.phi_a = np.where(np.isnan(tr.phi_a), np.nan, 3.0)
+    D.write_csv(tr, p)
+    with pytest.raises(D.TrialError, match=r"column phi_a: 3\.0 rad is outside .*degrees"):
+        D.read_csv(p)
+
+
+def test_bag_from_the_embedded_runner_gives_the_same_activations(tmp_path):
+    rec = Recorder(tmp_path / "bag")
+    run_trial(TrialSpec(math.radians(5.0), math.radians(22.0), duration=6.0, initial_speed=2.0),
+              config=PlantConfig(switching="tick"), recorder=rec, namespace="wheel0")
+    rec.close()
+    trials = D.load_trials([tmp_path / "bag"])
+    assert [t.name for t in trials] == ["bag_wheel0"]
+    tr = trials[0]
+    assert tr.t.shape[0] == 6 * 300 and len(tr.activations) > 20
+    on = [a for a in tr.activations[2:]]
+    assert all(a.phi_a == pytest.approx(math.radians(5.0)) for a in on)
+    assert all(b.eta == a.eta + 1 for a, b in zip(on, on[1:]))
+
+
+def test_coastdown_friction_matches_the_closed_form():
+    # Coulomb friction alone: constant deceleration (r + L)/L tau_f / (J/L); the fit is exact on
+    # exact data and within 2 % through the 10-bit encoder with noise
+    base = WheelParams()
+    for effects, tol in (({}, 1e-6), (ENCODER, 0.02)):
+        cfg = PlantConfig(seed=4, switching="tick", effects=effects_from_mapping(effects))
+        trials = [S.record(S.SyntheticTrial(math.radians(a), drive=8.0, coast=8.0), config=cfg)
+                  for a in (2.0, 6.0)]
+        est = F.coastdown_friction(trials, base)
+        assert est.segments == 2
+        assert est.tau_f == pytest.approx(base.tau_f, rel=tol)
+        assert est.ci95[0] <= base.tau_f * (1 + tol) and est.ci95[1] >= base.tau_f * (1 - tol)
