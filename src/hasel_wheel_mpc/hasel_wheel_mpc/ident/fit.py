@@ -331,8 +331,12 @@ class Problem:
         Returns (x0 (w, 2), residual (n,), d residual / d xi1_0 (n,), d residual / d xi2_0 (n,)).
         """
         pv, extra = self.model(full)
-        eta = self.eta + extra.get("eta_offset", 0.0)
-        gains = self.gains(pv)
+        return self.starts_for(pv, self.eta + extra.get("eta_offset", 0.0), self.gains(pv), x0,
+                               iterations)
+
+    def starts_for(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray, x0: np.ndarray,
+                   iterations: int = 12):
+        """:meth:`solve_starts` for a given parameter vector, sectors and gains."""
         x0 = x0.copy()
         h1, h2 = 1e-6, 1e-6
         for _ in range(iterations):

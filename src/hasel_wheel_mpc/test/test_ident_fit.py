@@ -1,0 +1,59 @@
+"""Identification of the nominal model: recovery of known parameters from plant data through
+the 10-bit encoder, and the identifiability report against the analytic null directions."""
+import math
+
+import numpy as np
+import pytest
+
+from hasel_wheel_mpc.ident import fit as F
+from hasel_wheel_mpc.ident import identifiability as I
+from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.plant import PlantConfig
+
+ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.001, "unit": "rad"}}}
+TRUE = WheelParams()
+SET = tuple(S.SyntheticTrial(math.radians(a), drive=30.0, coast=9.0) for a in (1.0, 4.0, 7.0))
+
+
+@pytest.fixture(scope="module")
+def nominal_trials():
+    return S.record_set(SET, config=PlantConfig(seed=5, switching="tick",
+                                                effects=effects_from_mapping(ENCODER)))
+
+
+def test_force_coordinates_round_trip():
+    c = F.force_coordinates(TRUE)
+    back = F.from_force_coordinates(TRUE.with_values(sigma4=-0.5, sigma6=3.0), **c)
+    for k in ("sigma2", "sigma4", "sigma5", "sigma6"):
+        assert getattr(back, k) == pytest.approx(getattr(TRUE, k), rel=1e-12)
+    # the bump's top is where the model notes put it: exp(centre) ~ 0.36 rad (~21 deg)
+    assert math.exp(c["centre"]) == pytest.approx(0.364, abs=0.002)
+
+
+def test_nominal_parameters_are_recovered(nominal_trials):
+    fr = F.coastdown_friction(nominal_trials, TRUE)
+    assert fr.tau_f == pytest.approx(TRUE.tau_f, rel=0.02)
+    start = TRUE.with_values(sigma6=TRUE.sigma6 * 0.85, sigma2=TRUE.sigma2 * 1.15,
+                             sigma4=TRUE.sigma4 * 0.97)
+    res = F.Problem(nominal_trials, start).fit(start={"tau_f": fr.tau_f})
+    assert res.converged, res.message
+    true = F.force_coordinates(TRUE)
+    for name in ("peak", "centre", "width", "b"):
+        assert res.values[name] == pytest.approx(true[name], rel=0.05), name
+    assert res.values["tau_f"] == pytest.approx(TRUE.tau_f, rel=0.02)
+    # residual at the encoder's floor: quantisation (6.1 mrad / sqrt(12)) with 1 mrad noise
+    assert res.rmse < 1.15 * math.hypot(2 * math.pi / 1024 / math.sqrt(12), 0.001)
+
+
+def test_identifiability_finds_both_structural_null_directions(nominal_trials):
+    short = [t.slice(0, 3000) for t in nominal_trials]
+    ident = I.identifiability(F.Problem(short, TRUE), TRUE)
+    s = ident.singular_values
+    assert s[-1] < 1e-5 and s[-2] < 1e-5 and s[-3] > 1e-4      # exactly two, and only two
+    null = ident.directions[-2:]                                # rows span the null space
+    for v in (I.ratio_null_direction(), I.bump_null_direction(TRUE)):
+        resid = v - null.T @ (null @ v)
+        assert np.linalg.norm(resid) < 1e-3
+    assert len(ident.undetermined()) == 2
