@@ -1,0 +1,317 @@
+"""Residual diagnostics in the spirit of Ljung's model validation (MATLAB ``resid``).
+
+Two residuals come out of a fit (:class:`~.fit.Problem`):
+
+* the **output residual** r [rad]: simulated minus measured angle, every sample, windows
+  re-started from fitted states.  For an output-error model it should be independent of
+  the input: its cross-correlation with q must stay inside the 99 % band.  Its
+  autocorrelation is reported too (whiteness), with the same band;
+* the **acceleration residual** a [rad/s^2]: the second derivative of r inside each window
+  (Savitzky-Golay, ``SG_WINDOW`` samples).  An unmodelled torque tau shows up in it as
+  -tau / (J/L), so its structure against physical axes points at the missing effect.
+
+Structure is judged against each axis (wheel angle, pivot angle, contact angle, actuator
+index, time, accumulated HV time of the active actuator, speed, time since switch-on) by a
+one-way analysis of variance over bins, and against the unwrapped wheel angle and time by a
+least-squares sinusoid scan (a periodogram).  Samples of a are correlated over the filter
+length, so every test counts one independent sample per ``SG_WINDOW``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal, stats
+
+from hasel_wheel_sim.model import N_ACTUATORS, SECTOR
+
+from .fit import FitResult, Problem
+
+SG_WINDOW = 61          # samples (0.2 s at 300 Hz) of the Savitzky-Golay derivative
+SIGNIFICANCE = 1e-6     # p-value below which structure counts (many axes and frequencies)
+MIN_AMPLITUDE = 0.005   # [rad/s^2] structure smaller than this is not reported
+
+#: axis -> (unit, periodic period or None, only while an actuator is on)
+AXES = {
+    "wheel_angle": ("rad", 2 * math.pi, False),
+    "pivot_angle": ("rad", 2 * math.pi, False),
+    "contact_angle": ("rad", None, True),
+    "actuator": ("index", None, True),
+    "time": ("s", None, False),
+    "hv_time": ("s", None, True),
+    "speed": ("rad/s", None, False),
+    "on_time": ("s", None, True),
+}
+
+
+@dataclass
+class AxisStructure:
+    """Bin means of the acceleration residual against one axis."""
+
+    axis: str
+    unit: str
+    centers: np.ndarray
+    means: np.ndarray
+    stderr: np.ndarray
+    p_value: float
+    amplitude: float          # half the peak-to-peak of the bin means [rad/s^2]
+
+
+@dataclass
+class Peak:
+    """A sinusoid in the acceleration residual along an axis."""
+
+    axis: str                 # "wheel_angle_unwrapped" [rad] or "time" [s]
+    period: float             # in the axis' unit
+    amplitude: float          # [rad/s^2]
+    p_value: float
+    per_wheel_turn: float     # 2 pi / period (angle axis only, else nan)
+    per_pivot_lap: float      # (2 pi L / r) / period (angle axis only, else nan)
+
+
+@dataclass
+class Signature:
+    """Structure the model does not explain: where, how periodic, how large."""
+
+    axis: str
+    unit: str
+    period: float | None      # None when not periodic
+    amplitude: float          # [rad/s^2]
+    torque: float             # amplitude x (J/L) [N*m]
+    p_value: float
+    text: str
+
+
+@dataclass
+class Diagnostics:
+    rms_angle: float                      # [rad]
+    rms_accel: float                      # [rad/s^2]
+    acf_lags: np.ndarray
+    acf: np.ndarray
+    ccf_lags: np.ndarray
+    ccf_q: np.ndarray
+    band99: float
+    whiteness_outside: float              # fraction of lags 1..L outside the band
+    input_correlation_max: float          # max |ccf| with q
+    structures: dict[str, AxisStructure] = field(default_factory=dict)
+    spectra: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    peaks: list[Peak] = field(default_factory=list)
+    signatures: list[Signature] = field(default_factory=list)
+    # per-sample series for plots
+    accel: np.ndarray | None = None
+    axes: dict[str, np.ndarray] = field(default_factory=dict)
+    mask: np.ndarray | None = None
+
+
+def acceleration_residual(problem: Problem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(a (n,) [rad/s^2], valid (n,) bool): Savitzky-Golay second derivative of r per window."""
+    a = np.zeros(problem.n)
+    valid = np.zeros(problem.n, dtype=bool)
+    for w in range(problem.n_windows):
+        i, j = problem.starts[w], problem.starts[w + 1]
+        if j - i < 2 * SG_WINDOW:
+            continue
+        dt = float(np.median(np.diff(problem.t[i:j])))
+        a[i:j] = signal.savgol_filter(r[i:j], SG_WINDOW, 2, deriv=2, delta=dt, mode="interp")
+        h = SG_WINDOW // 2
+        valid[i + h:j - h] = problem.ok[i + h:j - h]
+    return a, valid
+
+
+def axis_values(problem: Problem, x1: np.ndarray, x2: np.ndarray) -> dict[str, np.ndarray]:
+    """Each axis at every sample (nan where it does not apply)."""
+    on = problem.q > 0
+    t_rel = np.concatenate([tr.t - tr.t[0] for tr in problem.trials])
+    hv = np.concatenate([_cumulative_on(tr.t, tr.q, tr.eta_unwrapped % N_ACTUATORS)
+                         for tr in problem.trials])
+    ratio = problem.base.r / problem.base.L
+    return {
+        "wheel_angle": np.mod(x1, 2 * math.pi),
+        "pivot_angle": np.mod(ratio * x1, 2 * math.pi),
+        "contact_angle": np.where(on, x1 - problem.eta * SECTOR, np.nan),
+        "actuator": np.where(on, problem.pad.astype(float), np.nan),
+        "time": t_rel,
+        "hv_time": np.where(on, hv, np.nan),
+        "speed": x2.copy(),
+        "on_time": np.where(on, problem.on_time, np.nan),
+    }
+
+
+def _cumulative_on(t: np.ndarray, q: np.ndarray, pad: np.ndarray) -> np.ndarray:
+    """Accumulated HV on-time [s] of the active actuator at each sample."""
+    acc = np.zeros(N_ACTUATORS)
+    out = np.zeros(t.shape[0])
+    dt = np.diff(t, append=t[-1])
+    for k in range(t.shape[0]):
+        out[k] = acc[pad[k]]
+        if q[k]:
+            acc[pad[k]] += dt[k]
+    return out
+
+
+def _correlation(x: np.ndarray, y: np.ndarray, max_lag: int) -> np.ndarray:
+    x = x - x.mean()
+    y = y - y.mean()
+    n = x.shape[0]
+    f = np.fft.rfft(x, 2 * n)
+    g = np.fft.rfft(y, 2 * n)
+    c = np.fft.irfft(f * np.conj(g), 2 * n)
+    full = np.concatenate([c[-max_lag:], c[:max_lag + 1]])
+    return full / (np.sqrt((x @ x) * (y @ y)) or 1.0)
+
+
+def _bins(axis: str, v: np.ndarray, a: np.ndarray, n_bins: int = 24) -> AxisStructure | None:
+    unit, period, _ = AXES[axis]
+    if v.size < 50 * SG_WINDOW:
+        return None
+    if axis == "actuator":
+        edges = np.arange(N_ACTUATORS + 1) - 0.5
+    elif period is not None:
+        edges = np.linspace(0.0, period, n_bins + 1)
+    else:
+        edges = np.unique(np.quantile(v, np.linspace(0, 1, n_bins + 1)))
+        if edges.size < 3:
+            return None
+    idx = np.clip(np.searchsorted(edges, v, side="right") - 1, 0, edges.size - 2)
+    k = edges.size - 1
+    cnt = np.bincount(idx, minlength=k).astype(float)
+    s1 = np.bincount(idx, a, minlength=k)
+    s2 = np.bincount(idx, a * a, minlength=k)
+    use = cnt > 2 * SG_WINDOW
+    if use.sum() < 3:
+        return None
+    mean = np.where(use, s1 / np.maximum(cnt, 1), np.nan)
+    var = np.where(use, s2 / np.maximum(cnt, 1) - mean ** 2, np.nan)
+    n_eff = cnt / SG_WINDOW                       # correlated samples: one per filter length
+    se = np.sqrt(np.maximum(var, 0) / np.maximum(n_eff, 1))
+    grand = np.nansum(s1[use]) / cnt[use].sum()
+    between = np.nansum(n_eff[use] * (mean[use] - grand) ** 2) / (use.sum() - 1)
+    within = np.nansum(n_eff[use] * var[use]) / max(n_eff[use].sum() - use.sum(), 1)
+    F = between / within if within > 0 else 0.0
+    p = float(stats.f.sf(F, use.sum() - 1, max(n_eff[use].sum() - use.sum(), 1)))
+    centers = 0.5 * (edges[:-1] + edges[1:])
+    amp = 0.5 * float(np.nanmax(mean[use]) - np.nanmin(mean[use]))
+    return AxisStructure(axis, unit, centers, mean, se, p, amp)
+
+
+def _scan(x: np.ndarray, a: np.ndarray, freqs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares sinusoid amplitude [rad/s^2] and F statistic at each frequency [1/unit]."""
+    a = a - a.mean()
+    amp = np.empty(freqs.size)
+    fstat = np.empty(freqs.size)
+    tot = float(a @ a)
+    n_eff = a.size / SG_WINDOW
+    for i, f in enumerate(freqs):
+        ph = 2 * math.pi * f * x
+        c, s = np.cos(ph), np.sin(ph)
+        A = np.array([[c @ c, c @ s], [c @ s, s @ s]])
+        b = np.array([c @ a, s @ a])
+        try:
+            coef = np.linalg.solve(A, b)
+        except np.linalg.LinAlgError:
+            amp[i], fstat[i] = 0.0, 0.0
+            continue
+        explained = float(coef @ b)
+        amp[i] = math.hypot(coef[0], coef[1])
+        fstat[i] = (explained / 2) / max((tot - explained) / (n_eff - 2), 1e-300)
+    return amp, fstat
+
+
+def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnostics:
+    """Diagnostics of ``result`` (a fit of ``problem``)."""
+    r = problem.residual(result.z)
+    x1, x2 = problem.simulate(result.z)
+    x1, x2 = x1.copy(), x2.copy()
+    ok = problem.ok
+    a, valid = acceleration_residual(problem, r)
+    band = 2.576 / math.sqrt(max(ok.sum(), 1))
+    acf = _correlation(r[ok], r[ok], max_lag)[max_lag:]
+    ccf = _correlation(r[ok], problem.q[ok], max_lag)
+    lags = np.arange(-max_lag, max_lag + 1)
+    diag = Diagnostics(
+        rms_angle=float(np.sqrt(np.mean(r[ok] ** 2))),
+        rms_accel=float(np.sqrt(np.mean(a[valid] ** 2))) if valid.any() else math.nan,
+        acf_lags=np.arange(max_lag + 1), acf=acf, ccf_lags=lags, ccf_q=ccf, band99=band,
+        whiteness_outside=float(np.mean(np.abs(acf[1:]) > band)),
+        input_correlation_max=float(np.max(np.abs(ccf))), accel=a, mask=valid)
+    axes = axis_values(problem, x1, x2)
+    diag.axes = axes
+    inertia = problem.base.inertia
+    for name, v in axes.items():
+        m = valid & np.isfinite(v)
+        st = _bins(name, v[m], a[m])
+        if st is not None:
+            diag.structures[name] = st
+    # periodograms: along the unwrapped wheel angle and along time
+    L_over_r = problem.base.L / problem.base.r
+    span = max(float(np.ptp(x1[problem.trial_slices[i]])) for i in range(len(problem.trials)))
+    for axis, x, fmax, res in (("wheel_angle_unwrapped", x1, 4.0, span),
+                               ("time", axes["time"], 10.0,
+                                max(tr.duration for tr in problem.trials))):
+        if res <= 0 or valid.sum() < 100 * SG_WINDOW:
+            continue
+        step = 1.0 / (4.0 * res)
+        freqs = np.arange(2.0 / res, fmax, step)
+        sub = np.flatnonzero(valid)[::3]        # every third sample: a is smooth over 61
+        amp, fstat = _scan(x[sub], a[sub], freqs)
+        diag.spectra[axis] = (freqs, amp)
+        p = stats.f.sf(fstat, 2, max(sub.size / (SG_WINDOW / 3) - 2, 1))
+        order = np.argsort(-amp)
+        taken: list[float] = []
+        for i in order[:50]:
+            if p[i] > SIGNIFICANCE or amp[i] < MIN_AMPLITUDE:
+                continue
+            f = freqs[i]
+            if any(abs(f - g) < 3 * step for g in taken):
+                continue
+            taken.append(f)
+            period = 1.0 / f
+            turn = 2 * math.pi / period if axis != "time" else math.nan
+            lap = 2 * math.pi * L_over_r / period if axis != "time" else math.nan
+            diag.peaks.append(Peak(axis, period, float(amp[i]), float(p[i]), turn, lap))
+            if len(taken) >= 3:
+                break
+    diag.signatures = signatures(diag, inertia)
+    return diag
+
+
+def signatures(diag: Diagnostics, inertia: float) -> list[Signature]:
+    """The significant structure in words: periodic peaks first, then binned axes."""
+    out: list[Signature] = []
+    for pk in diag.peaks:
+        if pk.axis == "time":
+            text = (f"periodic in time with period {pk.period:.3g} s, amplitude "
+                    f"{pk.amplitude:.3g} rad/s^2 ({pk.amplitude * inertia:.2g} N*m)")
+            out.append(Signature("time", "s", pk.period, pk.amplitude, pk.amplitude * inertia,
+                                 pk.p_value, text))
+            continue
+        turns = pk.per_wheel_turn
+        laps = pk.per_pivot_lap
+        if abs(laps - round(laps)) < 0.05 and round(laps) >= 1 and \
+                abs(turns - round(turns)) > 0.05:
+            axis, unit, period = "pivot_angle", "rad", 2 * math.pi / round(laps)
+            what = f"{round(laps)} per pivot lap"
+        elif abs(turns - round(turns)) < 0.05 and round(turns) >= 1:
+            axis, unit, period = "wheel_angle", "rad", 2 * math.pi / round(turns)
+            what = f"{round(turns)} per wheel turn"
+        else:
+            axis, unit, period = "wheel_angle_unwrapped", "rad", pk.period
+            what = f"{turns:.3g} per wheel turn, {laps:.3g} per pivot lap"
+        text = (f"periodic in {axis.replace('_', ' ')} with period {period:.4g} rad "
+                f"({what}; {pk.period:.4g} rad of wheel angle), amplitude {pk.amplitude:.3g} "
+                f"rad/s^2 ({pk.amplitude * inertia:.2g} N*m)")
+        out.append(Signature(axis, unit, period, pk.amplitude, pk.amplitude * inertia,
+                             pk.p_value, text))
+    periodic_axes = {s.axis for s in out}
+    for name, st in diag.structures.items():
+        if st.p_value > SIGNIFICANCE or st.amplitude < MIN_AMPLITUDE or name in periodic_axes:
+            continue
+        if AXES[name][1] is not None and periodic_axes:
+            continue                      # a periodic axis already described by a peak
+        text = (f"varies with {name.replace('_', ' ')} [{st.unit}]: bin means span "
+                f"+-{st.amplitude:.3g} rad/s^2 ({st.amplitude * inertia:.2g} N*m), "
+                f"p = {st.p_value:.1e}")
+        out.append(Signature(name, st.unit, None, st.amplitude, st.amplitude * inertia,
+                             st.p_value, text))
+    return out
