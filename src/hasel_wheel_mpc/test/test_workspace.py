@@ -80,3 +80,45 @@ def test_rclpy_only_in_node_and_launch_modules():
             if re.search(r"(^|/)(nodes?/|launch/|test/)|_node\.py$|launch\.py$", rel):
                 continue
             assert not re.search(r"^\s*(import rclpy|from rclpy)", f.read_text(), re.M), rel
+
+
+def declared_parameters(pkg):
+    """{name: default or None} of every declare_parameter("name", default, ...) in pkg's nodes."""
+    out = {}
+    for f in (SRC / pkg).rglob("*_node.py"):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                    and node.func.attr == "declare_parameter" and node.args
+                    and isinstance(node.args[0], ast.Constant)):
+                default = node.args[1] if len(node.args) > 1 else None
+                out[node.args[0].value] = default.value if isinstance(default, ast.Constant) else None
+    return out
+
+
+@pytest.mark.parametrize("pkg", PY_PACKAGES)
+def test_parameter_files_match_declared_parameters(pkg):
+    """Every ros__parameters entry is declared by a node of the package, with the default's type
+    (rclpy refuses an int for a double parameter, e.g. `gain: 0` for 0.0)."""
+    import yaml
+    declared = declared_parameters(pkg)
+    for f in (SRC / pkg / "config").glob("*.yaml"):
+        data = yaml.safe_load(f.read_text())
+        if not isinstance(data, dict):
+            continue
+        for key, block in data.items():
+            if not (isinstance(block, dict) and "ros__parameters" in block):
+                continue
+            for name, value in block["ros__parameters"].items():
+                assert name in declared, f"{f.name}: {key}: {name} is declared by no {pkg} node"
+                default = declared[name]
+                if default is not None:
+                    assert type(value) is type(default), \
+                        f"{f.name}: {name} = {value!r}, but the node declares {default!r}"
+
+
+def test_launch_files_name_existing_share_files():
+    """Files a launch file names as [share, "config" | "launch", "file"] exist in some package."""
+    launches = list(SRC.glob("*/launch/*.launch.py"))
+    for f in launches:
+        for sub, name in re.findall(r'"(config|launch)",\s*"([^"]+)"', f.read_text()):
+            assert list(SRC.glob(f"*/{sub}/{name}")), f"{f.name}: no package has {sub}/{name}"

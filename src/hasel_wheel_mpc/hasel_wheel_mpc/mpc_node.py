@@ -1,0 +1,318 @@
+"""mpc_node: the model predictive speed controller (paper Sec. V) as a ROS 2 node.
+
+Decides at each switch-on of the actuator of interest seen in ``state_estimate`` (the paper's
+decision point), on an idle wheel after ``idle_samples`` samples with HV off, and once more at
+once when the reference changes while the actuator is on and there is time before its
+switch-off: the loop of ``closed_loop.run_closed_loop``, with :meth:`hasel_wheel_mpc.mpc.Mpc.decide`
+doing the work.  ``telemetry`` tells which command the device latched (its phi_a, phi_d are the
+current pad's).  Publishes ``command``, ``mpc_status`` (one per decision) and ``/diagnostics``.
+
+The reference [rad/s] is the parameter ``reference_speed``; a std_msgs/Float64 on the topic
+``reference_speed`` sets that parameter (same validation), so ``ros2 topic pub`` and
+``ros2 param set`` both drive it and ``ros2 param get`` always shows the one in use.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections import OrderedDict
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from hasel_wheel_msgs.msg import ActuationCommand, HybridStateEstimate, MpcStatus, WheelTelemetry
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64
+
+from hasel_wheel_driver import samples, topics
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, diagnostic_array, fill,
+                                                  float_param, int_param, qos_profile, text_param)
+from hasel_wheel_sim.model import SECTOR
+from hasel_wheel_sim.params import ParameterError, WheelParams, load_wheel_params
+
+from .mpc import Mpc, MpcConfig
+
+D = math.radians
+#: Parameters that are MpcConfig fields of the same name (changeable at run time).
+CONFIG_PARAMS = ("brake_threshold", "terminal_weight", "time_weighted", "deadline_margin",
+                 "max_horizon")
+#: (phi_a, phi_d) [rad] assumed for a latched command this node did not send (closed_loop's start).
+DEFAULT_ANGLES = (D(3.0), D(22.0))
+#: Until the first switch-on, an unconfirmed start command is sent again after this many samples.
+START_PERIOD = 30
+#: The start command aims at a pad whose switch-on is at least this far ahead [s] (latency).
+START_LEAD = 0.1
+
+
+class MpcNode(Node):
+
+    def __init__(self) -> None:
+        super().__init__("mpc_node")
+        cfg = MpcConfig()
+        wheel_file = self.declare_parameter(
+            "wheel_params_file", "",
+            text_param("model parameter YAML (wheel: {name: {value, unit}}); '' = built-in "
+                       "paper values")).value
+        self.reference = self.declare_parameter(
+            "reference_speed", 1.0,
+            float_param("speed reference xi2_r [rad/s]; also set by std_msgs/Float64 on the "
+                        "topic reference_speed", 0.0, 5.0)).value
+        self.declare_parameter(
+            "brake_threshold", cfg.brake_threshold,
+            float_param("braking mode when the estimated speed (+ d) exceeds the reference by "
+                        "this much [rad/s]", 0.01, 2.0))
+        self.declare_parameter(
+            "terminal_weight", cfg.terminal_weight,
+            float_param("weight w_T of the terminal speed error in the cost [1]; 0 = (59) alone",
+                        0.0, 100.0))
+        self.declare_parameter(
+            "time_weighted", cfg.time_weighted,
+            text_param("cost = mean over all the cycle's samples (true) or (59)'s mean of the "
+                       "two segment means (false)", read_only=False))
+        self.declare_parameter(
+            "deadline_margin", cfg.deadline_margin,
+            float_param("the decision must be ready this long before the current switch-off "
+                        "(command latency) [s]", 0.0, 0.05))
+        self.declare_parameter(
+            "max_horizon", cfg.max_horizon,
+            float_param("longest prediction [s]", 0.1, 10.0))
+        self.idle_samples = self.declare_parameter(
+            "idle_samples", 150,
+            int_param("decide on an idle wheel after this many samples with HV off [samples]",
+                      10, 3000)).value
+        self.redecide_time = self.declare_parameter(
+            "redecide_min_time", 0.02,
+            float_param("re-decide on a new reference only if the current actuator stays on "
+                        "this long [s]", 0.0, 0.2)).value
+        period = self.declare_parameter(
+            "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
+                                                   True)).value
+        config = dataclasses.replace(cfg, **{k: self.get_parameter(k).value for k in CONFIG_PARAMS})
+        params = load_wheel_params(wheel_file) if wheel_file else WheelParams()
+        self.mpc = Mpc(params, config=config)      # loads the compiled predictor
+
+        # loop state, as in closed_loop.run_closed_loop
+        self.angles: OrderedDict[int, tuple[float, float]] = OrderedDict()
+        self.latched_seq = -1
+        self.prev_q = 0
+        self.idle = 0
+        self.last_ref = self.reference
+        self.started = False
+        self.start_pad, self.start_idle = -1, 0
+        # diagnostics
+        self.estimates = 0
+        self.window_estimates = 0
+        self.window_t0 = time.monotonic()
+        self.compute: list[float] = []
+        self.slack_min = math.inf
+        self.braking = 0
+        self.late = 0           # decided in time by Mpc, but late once the node's overhead counts
+        self.refs_rejected = 0
+        self.starts = 0
+        self.last_status: MpcStatus | None = None
+        self.last_age = math.nan
+
+        pubs = create_publishers(self, (topics.COMMAND, topics.MPC_STATUS, topics.DIAGNOSTICS))
+        self.pub_cmd, self.pub_status, self.pub_diag = pubs.values()
+        self.create_subscription(HybridStateEstimate, topics.STATE_ESTIMATE.name,
+                                 self._on_estimate, qos_profile(topics.STATE_ESTIMATE.qos))
+        self.create_subscription(WheelTelemetry, topics.TELEMETRY.name, self._on_telemetry,
+                                 qos_profile(topics.TELEMETRY.qos))
+        # reliable but volatile: matches a latched publisher and `ros2 topic pub`'s default
+        # (volatile) too; a transient_local subscription would not match the latter
+        self.create_subscription(Float64, topics.REFERENCE.name, self._on_reference,
+                                 qos_profile(topics.RELIABLE))
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
+        self.create_timer(period, self._on_diagnostics)
+        self.get_logger().info(
+            f"ready: MPC, reference {self.reference:g} rad/s, {len(self.mpc.cands)} coarse "
+            f"candidates, brake threshold {config.brake_threshold:g} rad/s")
+
+    # -- parameters ---------------------------------------------------------------------------
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        changes = {p.name: p.value for p in params if p.name in CONFIG_PARAMS}
+        for p in params:
+            if p.name == "reference_speed" and not math.isfinite(p.value):
+                return SetParametersResult(successful=False,
+                                           reason="reference_speed must be a finite speed [rad/s]")
+            if p.name == "time_weighted" and not isinstance(p.value, bool):
+                return SetParametersResult(successful=False,
+                                           reason="time_weighted must be true or false")
+        try:
+            dataclasses.replace(self.mpc.config, **changes)
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, params) -> None:
+        changes = {p.name: p.value for p in params if p.name in CONFIG_PARAMS}
+        if changes:
+            self.mpc.config = dataclasses.replace(self.mpc.config, **changes)
+        for p in params:
+            if p.name == "reference_speed":
+                self.reference = float(p.value)
+                self.get_logger().info(f"reference {self.reference:g} rad/s")
+            elif p.name == "idle_samples":
+                self.idle_samples = int(p.value)
+            elif p.name == "redecide_min_time":
+                self.redecide_time = float(p.value)
+
+    def _on_reference(self, msg: Float64) -> None:
+        result = self.set_parameters([Parameter("reference_speed", Parameter.Type.DOUBLE,
+                                                float(msg.data))])[0]
+        if not result.successful:
+            self.refs_rejected += 1
+            self.get_logger().warn(f"reference {msg.data!r} on {topics.REFERENCE.name} "
+                                   f"rejected: {result.reason}")
+
+    # -- the loop -----------------------------------------------------------------------------
+    def _on_telemetry(self, msg: WheelTelemetry) -> None:
+        self.latched_seq = int(msg.last_command_sequence)
+
+    def _on_estimate(self, e: HybridStateEstimate) -> None:
+        t_in = time.perf_counter()
+        self.estimates += 1
+        self.window_estimates += 1
+        speed = e.xi2
+        self.idle = 0 if e.q else self.idle + 1
+        switched_on = e.q == 1 and self.prev_q == 0
+        self.prev_q = e.q
+        ref = self.reference
+        # a new reference while the current actuator is on: decide again now (the waiting command
+        # is replaced before it latches at the switch-off), if there is time before the switch-off
+        redecide = (ref != self.last_ref and e.q == 1 and not switched_on
+                    and e.deactivation_counter > self.redecide_time * max(speed, 0.1))
+        self.last_ref = ref
+        if not self.started:
+            if not e.q:
+                self._start(e)
+                return
+            self.started = True
+        if not (switched_on or self.idle == self.idle_samples or redecide):
+            return
+        pa_now, pd_now = self.angles.get(self.latched_seq, DEFAULT_ANGLES)
+        dec = self.mpc.decide(e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref, e.disturbance,
+                              (e.accel_disturbance, 0.0, 0.0))
+        if not switched_on:      # idle wheel: the next pad from the estimated angle
+            n_a = self._next_pad(e, dec.command.phi_a)
+            dec = dec._replace(command=dec.command._replace(n_a=n_a))
+        cmd = dec.command
+        t = self.get_clock().now().nanoseconds * 1e-9
+        self.pub_cmd.publish(fill(ActuationCommand(), samples.command_msg(cmd, t)))
+        self.angles[cmd.sequence] = (cmd.phi_a, cmd.phi_d)
+        while len(self.angles) > 64:
+            self.angles.popitem(last=False)
+        self.idle = 0
+        overhead = time.perf_counter() - t_in - dec.compute_time
+        slack = dec.deadline_slack - overhead
+        if slack < 0.0 and not dec.deadline_missed and not dec.braking:
+            self.late += 1
+        status = fill(MpcStatus(), samples.mpc_status_msg(
+            t, cmd, ref, dec.predicted_speed, dec.cost, dec.compute_time, slack, dec.candidates,
+            dec.deadline_missed, dec.braking))
+        self.pub_status.publish(status)
+        self.last_status = status
+        self.last_age = t - (e.header.stamp.sec + e.header.stamp.nanosec * 1e-9)
+        self.braking += dec.braking
+        if not dec.braking:
+            self.compute.append(dec.compute_time)
+            self.slack_min = min(self.slack_min, slack)
+
+    def _next_pad(self, e: HybridStateEstimate, phi_a: float, lead: float = 0.0) -> int:
+        """The first actuator whose switch-on angle is still ahead when a command arrives.
+
+        closed_loop takes floor(xi1 / (pi/8)) + 1, which skips a pad that is less than phi_a
+        past the sector boundary; for a slow wheel that can mean coasting to a stop.
+        """
+        ahead = e.xi1 + max(e.xi2, 0.0) * (self.mpc.config.deadline_margin + lead)
+        return (int(math.floor((ahead - phi_a) / SECTOR)) + 1) % 16
+
+    def _start(self, e: HybridStateEstimate) -> None:
+        """Start the wheel as closed_loop does: the next pad at the default angles, sequence 0.
+
+        Until the first switch-on, on every estimate: unless the device has a pad latched
+        that switches on within the next two sectors, send one (again): the command may have
+        been lost while discovery was under way, or have arrived so late that its pad had
+        passed and the device unwrapped it a turn ahead.  At once when the wanted pad changed,
+        otherwise after START_PERIOD samples.  A wheel left to coast stops short of its next
+        pad within about 2 s, and no pad starts it again.
+        """
+        if 0.0 < e.activation_counter <= 2.0 * SECTOR or self.pub_cmd.get_subscription_count() == 0:
+            return
+        want = self._next_pad(e, DEFAULT_ANGLES[0], START_LEAD)
+        if want == self.start_pad and self.idle - self.start_idle < START_PERIOD:
+            return                                          # in flight
+        self.start_pad, self.start_idle = want, self.idle
+        cmd = samples.Command(want, *DEFAULT_ANGLES, 0)
+        self.angles[0] = DEFAULT_ANGLES
+        self.pub_cmd.publish(fill(ActuationCommand(), samples.command_msg(
+            cmd, self.get_clock().now().nanoseconds * 1e-9)))
+        self.starts += 1
+        if self.starts == 1:
+            self.get_logger().info(f"start: actuator {cmd.n_a} at the default angles")
+
+    # -- diagnostics --------------------------------------------------------------------------
+    def _on_diagnostics(self) -> None:
+        now = time.monotonic()
+        rate = self.window_estimates / max(now - self.window_t0, 1e-9)
+        self.window_estimates, self.window_t0 = 0, now
+        lat = np.asarray(self.compute) * 1e3
+        self.compute = []
+        s = self.last_status
+        values = {
+            "reference_rad_s": f"{self.reference:.3f}",
+            "estimate_rate_hz": f"{rate:.1f}",
+            "decisions": str(self.mpc.decisions), "braking_decisions": str(self.braking),
+            "deadline_misses": str(self.mpc.deadline_misses),
+            "late_after_overhead": str(self.late),
+            "compute_ms_p50": f"{np.percentile(lat, 50):.3f}" if lat.size else "-",
+            "compute_ms_p99": f"{np.percentile(lat, 99):.3f}" if lat.size else "-",
+            "compute_ms_max": f"{lat.max():.3f}" if lat.size else "-",
+            "slack_ms_min": f"{self.slack_min * 1e3:.1f}" if math.isfinite(self.slack_min) else "-",
+            "candidates_last": str(s.candidates_evaluated) if s else "-",
+            "braking_now": str(s.braking) if s else "-",
+            "predicted_speed_rad_s": f"{s.predicted_speed:.4f}" if s else "-",
+            "estimate_age_ms": f"{self.last_age * 1e3:.1f}",
+            "references_rejected": str(self.refs_rejected),
+            "start_commands": str(self.starts), "started": str(self.started)}
+        self.slack_min = math.inf
+        if rate < 1.0:
+            level, text = DiagnosticStatus.STALE[0], "no state estimate"
+        elif self.mpc.deadline_misses or self.late:
+            level, text = DiagnosticStatus.WARN[0], "deadline misses (fallback input sent)"
+        else:
+            level, text = DiagnosticStatus.OK[0], "deciding"
+        self.pub_diag.publish(diagnostic_array(
+            self.get_clock().now().to_msg(), f"{self.get_fully_qualified_name()}: mpc",
+            "hasel_wheel_mpc", level, text, values))
+
+
+def main(args=None):
+    rclpy.init(args=args)
+
+    try:
+        node = MpcNode()
+    except (ParameterError, ValueError) as exc:
+        print(f"mpc_node: {exc}")
+        rclpy.try_shutdown()
+        raise SystemExit(2)
+
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        try:
+            node.destroy_node()
+        except KeyboardInterrupt:   # a second SIGINT (terminal Ctrl-C plus ros2 launch's own)
+            pass
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

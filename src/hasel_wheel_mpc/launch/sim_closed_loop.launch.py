@@ -1,0 +1,76 @@
+"""The closed speed loop on the simulated wheel: sim -> observer -> MPC -> sim.
+
+    ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py [namespace:=wheel0] [time_scale:=1.0]
+    ros2 topic pub --once reference_speed std_msgs/msg/Float64 "{data: 1.5}"
+    ros2 param set /mpc_node reference_speed 2.0
+
+The observer and the MPC start first; the simulator (hasel_wheel_sim's sim.launch.py, on the
+plant with realistic effects unless plant_file:=... says otherwise) starts once both have
+logged "ready:".  The simulated wheel starts at 1 rad/s and coasts to a stop within about 2 s
+without commands, and a stopped wheel cannot be started; loading (or on the first run,
+compiling) the model takes the nodes longer than that on a small machine.
+"""
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, RegisterEventHandler
+from launch.event_handlers import OnProcessIO
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.substitutions import FindPackageShare
+
+READY = b"ready:"
+
+
+def _when_all_ready(nodes, actions):
+    """Event handlers that return ``actions`` once every node in ``nodes`` has logged READY."""
+    waiting = set(range(len(nodes)))
+
+    def handler(i):
+        def on_output(event):
+            if i in waiting and READY in event.text:
+                waiting.discard(i)
+                if not waiting:
+                    return actions
+            return None
+        return on_output
+
+    return [RegisterEventHandler(OnProcessIO(target_action=n, on_stdout=handler(i),
+                                             on_stderr=handler(i)))
+            for i, n in enumerate(nodes)]
+
+
+def generate_launch_description():
+    share = FindPackageShare("hasel_wheel_mpc")
+    sim_share = FindPackageShare("hasel_wheel_sim")
+    namespace = LaunchConfiguration("namespace")
+    observer = Node(package="hasel_wheel_mpc", executable="observer_node", name="observer_node",
+                    namespace=namespace, output="screen",
+                    parameters=[LaunchConfiguration("observer_params_file")])
+    mpc = Node(package="hasel_wheel_mpc", executable="mpc_node", name="mpc_node",
+               namespace=namespace, output="screen",
+               parameters=[LaunchConfiguration("mpc_params_file")])
+    sim = IncludeLaunchDescription(
+        PythonLaunchDescriptionSource(PathJoinSubstitution([sim_share, "launch", "sim.launch.py"])),
+        launch_arguments={"namespace": namespace,
+                          "plant_file": LaunchConfiguration("plant_file"),
+                          "time_scale": LaunchConfiguration("time_scale")}.items())
+    return LaunchDescription([
+        DeclareLaunchArgument("namespace", default_value="",
+                              description="namespace of the wheel's topics and nodes ('' = root)"),
+        DeclareLaunchArgument("plant_file",
+                              default_value=PathJoinSubstitution([sim_share, "config",
+                                                                  "plant_realistic.yaml"]),
+                              description="plant YAML of the simulator (seed, switching, effects)"),
+        DeclareLaunchArgument("time_scale", default_value="1.0",
+                              description="simulated seconds per wall second"),
+        DeclareLaunchArgument("observer_params_file",
+                              default_value=PathJoinSubstitution([share, "config",
+                                                                  "observer.yaml"]),
+                              description="ROS parameter file of observer_node"),
+        DeclareLaunchArgument("mpc_params_file",
+                              default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
+                              description="ROS parameter file of mpc_node"),
+        *_when_all_ready([observer, mpc], [sim]),
+        observer,
+        mpc,
+    ])
