@@ -9,17 +9,15 @@ from __future__ import annotations
 
 import sys
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, WheelTelemetry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.link import DriverCore, LinkConfig
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, diagnostic_array, fill,
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, qos_profile, text_param)
 
 
@@ -104,17 +102,7 @@ class DriverNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-
-    node = DriverNode()
-
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(DriverNode, "hasel_wheel_driver", args)
 
 
 if __name__ == '__main__':

@@ -19,20 +19,18 @@ import time
 from collections import OrderedDict
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, HybridStateEstimate, MpcStatus, WheelTelemetry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
 from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, diagnostic_array, fill,
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, int_param, qos_profile, text_param)
 from hasel_wheel_sim.model import SECTOR
-from hasel_wheel_sim.params import ParameterError, WheelParams, load_wheel_params
+from hasel_wheel_sim.params import WheelParams, load_wheel_params
 
 from .mpc import Mpc, MpcConfig
 
@@ -293,25 +291,7 @@ class MpcNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-
-    try:
-        node = MpcNode()
-    except (ParameterError, ValueError) as exc:
-        print(f"mpc_node: {exc}")
-        rclpy.try_shutdown()
-        raise SystemExit(2)
-
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        try:
-            node.destroy_node()
-        except KeyboardInterrupt:   # a second SIGINT (terminal Ctrl-C plus ros2 launch's own)
-            pass
-        rclpy.try_shutdown()
+    run_node(MpcNode, "mpc_node", args)
 
 
 if __name__ == '__main__':

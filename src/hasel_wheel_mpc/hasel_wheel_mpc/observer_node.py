@@ -17,16 +17,14 @@ import time
 from collections import deque
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import (ActuationCommand, HybridStateEstimate, MpcStatus,
                                   WheelTelemetry)
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, diagnostic_array, fill,
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, qos_profile, text_param)
 from hasel_wheel_sim.params import ParameterError, WheelParams, load_wheel_params
 
@@ -237,25 +235,7 @@ class ObserverNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-
-    try:
-        node = ObserverNode()
-    except (ParameterError, ValueError) as exc:
-        print(f"observer_node: {exc}")
-        rclpy.try_shutdown()
-        raise SystemExit(2)
-
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        try:
-            node.destroy_node()
-        except KeyboardInterrupt:   # a second SIGINT (terminal Ctrl-C plus ros2 launch's own)
-            pass
-        rclpy.try_shutdown()
+    run_node(ObserverNode, "observer_node", args)
 
 
 if __name__ == '__main__':

@@ -9,18 +9,16 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, HybridStateEstimate, WheelTelemetry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, diagnostic_array, fill,
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, qos_profile, text_param)
-from hasel_wheel_sim.params import ParameterError, load_wheel_params
+from hasel_wheel_sim.params import load_wheel_params
 from hasel_wheel_sim.plant import load_plant_config
 from hasel_wheel_sim.sim_runtime import SimRuntime
 
@@ -99,22 +97,7 @@ class SimNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-
-    try:
-        node = SimNode()
-    except ParameterError as exc:
-        print(f"hasel_wheel_sim: {exc}")
-        rclpy.try_shutdown()
-        raise SystemExit(2)
-
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    run_node(SimNode, "hasel_wheel_sim", args)
 
 
 if __name__ == '__main__':

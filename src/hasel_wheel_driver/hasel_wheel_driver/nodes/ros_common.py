@@ -81,3 +81,33 @@ def text_param(description: str, read_only: bool = True,
     extra = f"one of: {', '.join(choices)}" if choices else ""
     return ParameterDescriptor(description=description, read_only=read_only,
                                additional_constraints=extra)
+
+
+def run_node(factory: Any, name: str, args: Any = None) -> None:
+    """The Jazzy demos' ``main()`` (demo_nodes_py talker.py), shared by every node.
+
+    Build the node (a bad parameter or file exits with status 2 and the reason), spin until
+    Ctrl-C or an external shutdown, then destroy the node and shut rclpy down.  A second SIGINT
+    during clean-up (a terminal's Ctrl-C plus the one ``ros2 launch`` forwards) is ignored, so
+    ``destroy_node`` still runs to the end once.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    rclpy.init(args=args)
+    try:
+        node = factory()
+    except ValueError as exc:          # includes ParameterError: names the field and range
+        print(f"{name}: {exc}")
+        rclpy.try_shutdown()
+        raise SystemExit(2)
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        try:
+            node.destroy_node()
+        except KeyboardInterrupt:
+            pass
+        rclpy.try_shutdown()
