@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import numpy as np
 
 from hasel_wheel_driver.samples import Command
+from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.wheel import TICK
@@ -54,19 +55,29 @@ def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
                     estimator_gain: float | None = 0.1, speed_source: str = "observer",
                     mpc_config: MpcConfig | None = None, w0: float = 1.0,
                     estimator_mode: str = "tracking", observer_config=None,
-                    recorder=None, ns: str = "/wheel0") -> LoopLog:
+                    recorder=None, ns: str = "/wheel0",
+                    controller_params: WheelParams | None = None,
+                    controller_extensions: Extensions | None = None,
+                    clock: Callable[[], float] | None = None) -> LoopLog:
     """Run the loop on ``profile`` ((start [s], reference [rad/s]), ...) for ``duration`` [s].
 
+    ``params`` are the plant's; its extensions come from ``plant_config``'s effects.  The
+    observer and the MPC use ``controller_params`` and ``controller_extensions`` (default: the
+    plant's ``params`` and no extensions, the paper's model), so a controller model other than
+    the plant (e.g. an identified one) can be tried against the same plant.
     ``estimator_gain`` None disables the disturbance estimator (``estimator_mode`` 'tracking'
     or 'paper'); ``speed_source`` 'observer' or 'finite_difference' (what the MPC sees as xi2;
     with the finite difference the observer's disturbance is not used either).  With a
     ``recorder`` (recorder.Recorder) every sample, estimate, decision and reference change is
-    written under namespace ``ns``.
+    written under namespace ``ns``.  ``clock`` [s] is the MPC's clock for its deadline
+    (default wall time; a constant clock makes the run independent of the machine's speed).
     """
     params = params or WheelParams()
     plant = Plant(params, plant_config or PlantConfig(switching="tick"), xi2=w0)
-    obs = Observer(params, config=observer_config)
-    mpc = Mpc(params, config=mpc_config)
+    model = controller_params or params
+    obs = Observer(model, controller_extensions, config=observer_config)
+    mpc = Mpc(model, controller_extensions, config=mpc_config,
+              **({"clock": clock} if clock is not None else {}))
     est = IntegralEstimator(gain=estimator_gain, mode=estimator_mode) if estimator_gain else None
     log = LoopLog()
     pending: Command | None = Command(1, D(3), D(22), 0)       # start the wheel

@@ -30,7 +30,7 @@ from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, int_param, qos_profile, text_param)
 from hasel_wheel_sim.model import SECTOR
-from hasel_wheel_sim.params import WheelParams, load_wheel_params
+from hasel_wheel_sim.model_file import controller_model
 
 from .mpc import Mpc, MpcConfig
 
@@ -55,6 +55,10 @@ class MpcNode(Node):
             "wheel_params_file", "",
             text_param("model parameter YAML (wheel: {name: {value, unit}}); '' = built-in "
                        "paper values")).value
+        model_file = self.declare_parameter(
+            "model_file", "",
+            text_param("model file (wheel: + extensions:, hasel_wheel_sim.model_file), e.g. an "
+                       "identified model, in place of wheel_params_file; '' = not used")).value
         self.reference = self.declare_parameter(
             "reference_speed", 1.0,
             float_param("speed reference xi2_r [rad/s]; also set by std_msgs/Float64 on the "
@@ -90,8 +94,8 @@ class MpcNode(Node):
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
                                                    True)).value
         config = dataclasses.replace(cfg, **{k: self.get_parameter(k).value for k in CONFIG_PARAMS})
-        params = load_wheel_params(wheel_file) if wheel_file else WheelParams()
-        self.mpc = Mpc(params, config=config)      # loads the compiled predictor
+        params, ext = controller_model(wheel_file, model_file)
+        self.mpc = Mpc(params, ext, config=config)      # loads the compiled predictor
 
         # loop state, as in closed_loop.run_closed_loop
         self.angles: OrderedDict[int, tuple[float, float]] = OrderedDict()

@@ -26,7 +26,8 @@ from rclpy.node import Node
 from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, qos_profile, text_param)
-from hasel_wheel_sim.params import ParameterError, WheelParams, load_wheel_params
+from hasel_wheel_sim.model_file import controller_model
+from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .disturbance import IntegralEstimator
 from .observer import Observer, ObserverConfig
@@ -57,6 +58,10 @@ class ObserverNode(Node):
             "wheel_params_file", "",
             text_param("model parameter YAML (wheel: {name: {value, unit}}); '' = built-in "
                        "paper values")).value
+        model_file = self.declare_parameter(
+            "model_file", "",
+            text_param("model file (wheel: + extensions:, hasel_wheel_sim.model_file), e.g. an "
+                       "identified model, in place of wheel_params_file; '' = not used")).value
         defaults = ObserverConfig()
         accel_noise = self.declare_parameter(
             "accel_noise", defaults.accel_noise,
@@ -91,8 +96,8 @@ class ObserverNode(Node):
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
                                                    True)).value
         self.frame_id = self.get_parameter("frame_id").value
-        params = load_wheel_params(wheel_file) if wheel_file else WheelParams()
-        self.obs = Observer(params, config=ObserverConfig(
+        params, ext = controller_model(wheel_file, model_file)
+        self.obs = Observer(params, ext, config=ObserverConfig(
             accel_noise=accel_noise, encoder_noise=encoder_noise, gate_sigma=gate_sigma,
             disturbance_rate=disturbance_rate))
         if mode not in ESTIMATOR_MODES:

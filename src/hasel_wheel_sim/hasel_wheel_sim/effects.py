@@ -73,6 +73,12 @@ EFFECT_FIELDS: dict[str, dict[str, FieldSpec]] = {
 }
 
 
+#: Effects that change the dynamics (they become :class:`Extensions`); the others are the
+#: sensor and link effects, which only the plant has.
+DYNAMIC_EFFECTS = ("charge_retention", "gain_spread", "com_offset", "viscous_drag", "rise_lag",
+                   "platform_disturbance")
+
+
 @dataclass(frozen=True)
 class EffectsConfig:
     """Enabled effects and their parameters (SI); ``enabled`` lists effect names."""
@@ -108,6 +114,33 @@ class EffectsConfig:
             retention_recovery=self.get("charge_retention", "recovery", 300.0),
             gains=gains,
         )
+
+    def with_extensions(self, ext: Extensions, where: str = "effects") -> "EffectsConfig":
+        """These sensor and link effects with the dynamics of ``ext`` (e.g. a model file's).
+
+        ``extensions()`` of the result returns ``ext`` exactly and draws nothing from the
+        generator.  The dynamics must come from one place only: if a dynamic effect is enabled
+        here as well (or explicit actuator gains are set), :class:`ParameterError` names it.
+        """
+        clash = sorted(self.enabled & set(DYNAMIC_EFFECTS))
+        if self.gains is not None:
+            clash.append("actuator_gains")
+        if clash:
+            raise ParameterError(
+                f"{where}: {clash} describe the wheel's dynamics, which the model's extensions "
+                f"give here; disable them (keep only sensor/link effects: "
+                f"{sorted(set(EFFECT_FIELDS) - set(DYNAMIC_EFFECTS))})")
+        values = {k: v for k, v in self.values.items() if k not in DYNAMIC_EFFECTS}
+        values.update({
+            "com_offset": {"torque": ext.com_torque, "phase": ext.com_phase},
+            "platform_disturbance": {"torque": ext.platform_torque, "phase": ext.platform_phase},
+            "viscous_drag": {"coefficient": ext.viscous},
+            "rise_lag": {"time_constant": ext.rise_time},
+            "charge_retention": {"rate": ext.retention_rate, "recovery": ext.retention_recovery},
+        })
+        enabled = self.enabled | {"com_offset", "platform_disturbance", "viscous_drag", "rise_lag",
+                                  "charge_retention"}
+        return EffectsConfig(frozenset(enabled), values, tuple(float(g) for g in ext.gains))
 
 
 def effects_from_mapping(data: Any, where: str = "effects") -> EffectsConfig:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -20,7 +20,9 @@ from hasel_wheel_driver.samples import ENCODER_COUNT, ENCODER_COUNTS, Command, T
 
 from . import layout as L
 from .effects import EffectsConfig, effects_from_mapping
-from .params import ParameterError, WheelParams, load_yaml_file
+from .model import Extensions
+from .model_file import load_model
+from .params import ParameterError, WheelParams, load_wheel_params, load_yaml_file
 from .wheel import TICK, HybridWheel, SwitchMode
 
 COUNT = ENCODER_COUNT  # one encoder count [rad]
@@ -62,6 +64,30 @@ def load_plant_config(path: str | Path) -> PlantConfig:
     if not isinstance(data, Mapping) or "plant" not in data:
         raise ParameterError(f"{path}: expected a top-level 'plant:' section")
     return plant_config_from_mapping(data["plant"], f"{path}: plant")
+
+
+def plant_with_model(config: PlantConfig, ext: Extensions, where: str = "plant") -> PlantConfig:
+    """``config`` with its dynamics replaced by ``ext`` (a model file's extensions).
+
+    Seed, switching and the sensor/link effects (encoder, glitches, dropouts, latency) stay;
+    a dynamic effect enabled in ``config`` as well raises :class:`ParameterError` (see
+    :meth:`EffectsConfig.with_extensions`).
+    """
+    return replace(config, effects=config.effects.with_extensions(ext, f"{where}.effects"))
+
+
+def load_plant_model(wheel_params_file: str | Path, plant_file: str | Path,
+                     model_file: str | Path = "") -> tuple[WheelParams, PlantConfig]:
+    """The sim node's plant: (parameters, config) from its three file parameters.
+
+    ``model_file`` '' : ``wheel_params_file`` and ``plant_file`` as they are.  Otherwise the
+    model file's parameters and extensions are the dynamics (``wheel_params_file`` is not read)
+    and ``plant_file`` adds seed, switching and sensor/link effects (:func:`plant_with_model`).
+    """
+    if not model_file:
+        return load_wheel_params(wheel_params_file), load_plant_config(plant_file)
+    params, ext = load_model(model_file)
+    return params, plant_with_model(load_plant_config(plant_file), ext, f"{plant_file}: plant")
 
 
 class _Draws:
