@@ -52,6 +52,9 @@ class Candidate:
     apply: Callable[[np.ndarray, np.ndarray, dict], None]
     describe: Callable[[np.ndarray], dict]
     axis: str   # the residual axis on which its signature shows
+    #: x (k,) -> the fields of hasel_wheel_sim.model.Extensions it sets (the saved model);
+    #: None when the plant and the MPC have no such field
+    extension: Callable[[np.ndarray], dict] | None = None
 
     @property
     def size(self) -> int:
@@ -97,9 +100,22 @@ def _spread(x, pv, extra):
 
 
 def _spread_describe(x):
-    d = np.concatenate(([-np.sum(x)], x))
-    g = np.exp(d)
+    g = np.array(_spread_gains(x))
     return {"gains": [float(v) for v in g], "std": float(np.std(g))}
+
+
+def _spread_gains(x) -> tuple[float, ...]:
+    return tuple(float(v) for v in np.exp(np.concatenate(([-np.sum(x)], x))))
+
+
+def _com_extension(x):
+    d = _com_describe(x)
+    return {"com_torque": d["torque_N_m"], "com_phase": d["phase_rad"]}
+
+
+def _platform_extension(x):
+    d = _platform_describe(x)
+    return {"platform_torque": d["torque_N_m"], "platform_phase": d["phase_rad"]}
 
 
 def _offset(x, pv, extra):
@@ -109,24 +125,28 @@ def _offset(x, pv, extra):
 LIBRARY: tuple[Candidate, ...] = (
     Candidate("viscous_drag", "viscous drag at the axle",
               (ParamSpec("c", "N*m*s/rad", 1e-4, 0.0, 0.1, 1e-3),), _viscous,
-              lambda x: {"coefficient_N_m_s_per_rad": float(x[0])}, "speed"),
+              lambda x: {"coefficient_N_m_s_per_rad": float(x[0])}, "speed",
+              lambda x: {"viscous": float(x[0])}),
     Candidate("com_offset", "centre of mass off the axle (gravity torque once per turn)",
               (ParamSpec("A", "N*m", 0.0, -0.5, 0.5, 1e-3),
-               ParamSpec("B", "N*m", 0.0, -0.5, 0.5, 1e-3)), _com, _com_describe, "wheel_angle"),
+               ParamSpec("B", "N*m", 0.0, -0.5, 0.5, 1e-3)), _com, _com_describe, "wheel_angle",
+              _com_extension),
     Candidate("platform_periodic", "torque periodic in the pivot angle (uneven platform)",
               (ParamSpec("P", "N*m", 0.0, -0.5, 0.5, 1e-3),
                ParamSpec("Q", "N*m", 0.0, -0.5, 0.5, 1e-3)), _platform, _platform_describe,
-              "pivot_angle"),
+              "pivot_angle", _platform_extension),
     Candidate("rise_lag", "actuator force builds up after switch-on",
               (ParamSpec("tau", "s", 0.005, 1e-5, 0.5, 0.01),), _rise,
-              lambda x: {"time_constant_s": float(x[0])}, "on_time"),
+              lambda x: {"time_constant_s": float(x[0])}, "on_time",
+              lambda x: {"rise_time": float(x[0])}),
     Candidate("charge_retention", "actuators weaken with accumulated HV time",
               (ParamSpec("rate", "1/s", 1e-3, 0.0, 1.0, 1e-2),
                ParamSpec("recovery", "s", 60.0, 1.0, 1e5, 60.0)), _retention,
-              lambda x: {"rate_per_s": float(x[0]), "recovery_s": float(x[1])}, "hv_time"),
+              lambda x: {"rate_per_s": float(x[0]), "recovery_s": float(x[1])}, "hv_time",
+              lambda x: {"retention_rate": float(x[0]), "retention_recovery": float(x[1])}),
     Candidate("gain_spread", "fabrication spread of the 16 actuators' force",
               tuple(ParamSpec(f"d{i}", "1", 0.0, -1.5, 1.5, 0.05) for i in range(1, N_ACTUATORS)),
-              _spread, _spread_describe, "actuator"),
+              _spread, _spread_describe, "actuator", lambda x: {"gains": _spread_gains(x)}),
     Candidate("angle_offset", "pads offset from the encoder's zero",
               (ParamSpec("delta", "rad", 0.0, -SECTOR / 2, SECTOR / 2, 0.01),), _offset,
               lambda x: {"offset_rad": float(x[0])}, "contact_angle"),

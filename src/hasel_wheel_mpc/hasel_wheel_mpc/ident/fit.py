@@ -35,11 +35,11 @@ from scipy import optimize, stats
 
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import N_ACTUATORS, param_vector
-from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .candidates import Candidate, ParamSpec
 from .data import Trial
-from .simulate import retention_charge, shoot
+from .simulate import retention_charge, shoot, shoot_windows
 
 #: Glitch rejection: a sample further than this from the line through its neighbours [rad].
 GLITCH = 0.05
@@ -335,23 +335,63 @@ class Problem:
                                iterations)
 
     def starts_for(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray, x0: np.ndarray,
-                   iterations: int = 12):
-        """:meth:`solve_starts` for a given parameter vector, sectors and gains."""
+                   iterations: int = 20):
+        """:meth:`solve_starts` for a given parameter vector, sectors and gains.
+
+        Gauss-Newton per window, safeguarded: a window takes its step only if its own squared
+        error does not grow, else it tries a quarter of the step next time (and doubles it
+        again after a success).  A window leaves the iteration once its step is far below the
+        encoder's resolution (1e-7 rad, 1e-6 rad/s) or has shrunk to 1/256.  Windows that have
+        left are not simulated again, so a warm start costs a few simulations of the windows
+        that still move, not ``iterations`` of the whole data set.
+        """
         x0 = x0.copy()
         h1, h2 = 1e-6, 1e-6
+        args = (self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts)
+        lengths = np.diff(self.starts)
+        out = [np.zeros(self.n) for _ in range(2)]
+        scratch = np.zeros(self.n)
+        every = np.arange(self.n_windows)
+        shoot_windows(*args, every, x0, pv, out[0], out[1])
+        r = np.where(self.ok, out[0] - self.y, 0.0)
+        cost = self._window_sums(r * r)
+        d1, d2 = np.zeros(self.n), np.zeros(self.n)
+        active = np.ones(self.n_windows, dtype=bool)
+        lam = np.ones(self.n_windows)                      # step length factor per window
+        stale = np.ones(self.n_windows, dtype=bool)        # derivatives not at x0
+
+        def derivatives(windows: np.ndarray) -> None:
+            sel = np.repeat(np.isin(every, windows), lengths)
+            for d, e, h in ((d1, (h1, 0.0), h1), (d2, (0.0, h2), h2)):
+                shoot_windows(*args, windows, x0 + e, pv, out[1], scratch)
+                d[sel] = (np.where(self.ok, out[1] - self.y, 0.0)[sel] - r[sel]) / h
+            stale[windows] = False
+
         for _ in range(iterations):
-            r = self._shoot(pv, eta, gains, x0)
-            d1 = (self._shoot(pv, eta, gains, x0 + [h1, 0.0]) - r) / h1
-            d2 = (self._shoot(pv, eta, gains, x0 + [0.0, h2]) - r) / h2
+            windows = np.flatnonzero(active)
+            if windows.size == 0:
+                break
+            derivatives(windows)
             a11, a12, a22, det = self._normal(d1, d2)
             g1, g2 = self._window_sums(d1 * r), self._window_sums(d2 * r)
             step = np.column_stack([-(a22 * g1 - a12 * g2) / det, -(a11 * g2 - a12 * g1) / det])
-            x0 += step
-            np.maximum(x0[:, 1], 0.0, out=x0[:, 1])     # the wheel rolls forwards (or rests)
-            # far below the encoder's resolution (6 mrad): more digits change no residual
-            if np.max(np.abs(step[:, 0])) < 1e-7 and np.max(np.abs(step[:, 1])) < 1e-6:
-                break
-        r = self._shoot(pv, eta, gains, x0)
+            step[~active] = 0.0
+            trial = x0 + lam[:, None] * step
+            np.maximum(trial[:, 1], 0.0, out=trial[:, 1])  # the wheel rolls forwards (or rests)
+            shoot_windows(*args, windows, trial, pv, out[1], scratch)
+            r_try = np.where(self.ok, out[1] - self.y, 0.0)
+            cost_try = self._window_sums(r_try * r_try)
+            take = active & (cost_try <= cost)
+            x0[take] = trial[take]
+            cost[take] = cost_try[take]
+            sel = np.repeat(take, lengths)
+            r[sel] = r_try[sel]
+            stale |= take
+            small = (np.abs(step[:, 0]) < 1e-7) & (np.abs(step[:, 1]) < 1e-6)
+            lam = np.where(take, np.minimum(2.0 * lam, 1.0), 0.25 * lam)
+            active &= ~(take & small) & (lam >= 1.0 / 256)
+        if stale.any():
+            derivatives(np.flatnonzero(stale))
         return x0, r, d1, d2
 
     def _project(self, J: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
@@ -365,6 +405,25 @@ class Problem:
             c2 = (a11 * g2 - a12 * g1) / det
             out[:, j] -= c1[win] * d1 + c2[win] * d2
         return out
+
+    def jacobian(self, theta: np.ndarray, x0: np.ndarray, r: np.ndarray, d1: np.ndarray,
+                 d2: np.ndarray) -> np.ndarray:
+        """(n, g) derivative of the residual [rad] with respect to the free parameters at
+        ``theta`` (g,), with the window starts x0 (w, 2) projected out (finite differences
+        with the starts held; ``r``, ``d1``, ``d2`` as returned by :meth:`solve_starts`)."""
+        hi = np.array([self.specs[i].upper for i in self.free])
+        scale = np.array([self.specs[i].scale for i in self.free])
+        J = np.empty((self.n, theta.size))
+        for j in range(theta.size):
+            h = 1e-6 * max(abs(theta[j]), scale[j])
+            if theta[j] + h > hi[j]:
+                h = -h
+            tp = theta.copy()
+            tp[j] += h
+            pv, extra = self.model(self.full_theta(tp))
+            J[:, j] = (self._shoot(pv, self.eta + extra.get("eta_offset", 0.0),
+                                   self.gains(pv), x0) - r) / h
+        return self._project(J, d1, d2)
 
     # -- fitting ------------------------------------------------------------------------------
     def fit(self, start: dict[str, float] | None = None, x0: np.ndarray | None = None,
@@ -387,7 +446,14 @@ class Problem:
         def evaluate(theta):
             key = theta.tobytes()
             if state["key"] != key:
-                x, r, d1, d2 = self.solve_starts(self.full_theta(theta), best["x0"])
+                try:
+                    x, r, d1, d2 = self.solve_starts(self.full_theta(theta), best["x0"])
+                except ParameterError:
+                    # a trial step outside the physical parameter ranges (a force law with
+                    # sigma6 beyond its bound): an error far above any fit, so the trust
+                    # region rejects the step and shrinks
+                    x, r = best["x0"], np.where(self.ok, 1.0, 0.0)
+                    d1 = d2 = np.zeros(self.n)
                 state.update(key=key, x0=x, r=r, d1=d1, d2=d2)
                 cost = float(r @ r)
                 if cost < state["best"]:
@@ -400,18 +466,7 @@ class Problem:
 
         def jac(theta):
             st = evaluate(theta)
-            r, x = st["r"].copy(), st["x0"]
-            J = np.empty((self.n, theta.size))
-            for j in range(theta.size):
-                h = 1e-6 * max(abs(theta[j]), scale[j])
-                if theta[j] + h > hi[j]:
-                    h = -h
-                tp = theta.copy()
-                tp[j] += h
-                pv, extra = self.model(self.full_theta(tp))
-                J[:, j] = (self._shoot(pv, self.eta + extra.get("eta_offset", 0.0),
-                                       self.gains(pv), x) - r) / h
-            return self._project(J, st["d1"], st["d2"])
+            return self.jacobian(theta, st["x0"], st["r"], st["d1"], st["d2"])
 
         if th.size:
             sol = optimize.least_squares(fun, th, jac=jac, bounds=(lo, hi), x_scale=scale,
@@ -431,7 +486,8 @@ class Problem:
         dof = max(n_used - g - 2 * self.n_windows, 1)
         s2 = float(r @ r) / dof
         inflation = autocorrelation_inflation(r, self.starts, used)
-        cov = np.linalg.pinv(J.T @ J, rcond=1e-12) * s2 * inflation if g else np.zeros((0, 0))
+        cov = covariance(J, np.array([self.specs[i].scale for i in self.free]),
+                         s2 * inflation) if g else np.zeros((0, 0))
         full = self.full_theta(theta)
         names = self.names
         sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -452,6 +508,23 @@ class Problem:
 
     def window_starts(self, z: np.ndarray) -> np.ndarray:
         return z[len(self.free):].reshape(-1, 2)
+
+
+def covariance(J: np.ndarray, scale: np.ndarray, s2: float, tol: float = 1e-10) -> np.ndarray:
+    """(g, g) parameter covariance s2 (J'J)^-1 from the Jacobian J (n, g), computed in the
+    parameters' typical scales (g,).  A direction the data does not determine (relative
+    eigenvalue below ``tol``) gets infinite variance in every parameter it involves, so its
+    interval reads (-inf, inf) rather than a falsely tight one."""
+    Js = J * scale
+    w, V = np.linalg.eigh(Js.T @ Js)
+    top = max(float(w[-1]), 1e-300)
+    ok = w > tol * top
+    inv = (V[:, ok] / w[ok]) @ V[:, ok].T
+    cov = inv * s2 * np.outer(scale, scale)
+    blind = np.any(np.abs(V[:, ~ok]) > 1e-3, axis=1) if (~ok).any() else np.zeros(len(w), bool)
+    cov[blind, :] = np.where(np.eye(len(w), dtype=bool)[blind, :], np.inf, 0.0)
+    cov[:, blind] = np.where(np.eye(len(w), dtype=bool)[:, blind], np.inf, 0.0)
+    return cov
 
 
 def at_rest_trimmed(tr: Trial, band: float = 0.015) -> Trial:

@@ -102,6 +102,7 @@ class Diagnostics:
     accel: np.ndarray | None = None
     axes: dict[str, np.ndarray] = field(default_factory=dict)
     mask: np.ndarray | None = None
+    defects: np.ndarray | None = None     # window continuity defects [rad/s^2]
 
 
 def acceleration_residual(problem: Problem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -218,6 +219,71 @@ def _scan(x: np.ndarray, a: np.ndarray, freqs: np.ndarray) -> tuple[np.ndarray, 
     return amp, fstat
 
 
+def window_defects(problem: Problem, z: np.ndarray, x2: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Continuity defects of the multiple shooting, as mean accelerations.
+
+    Window w+1 starts at the speed the data asks for; window w ends at the speed the model
+    carried it to.  Their difference over the window's duration is the mean unmodelled
+    acceleration [rad/s^2] over window w: an unmodelled torque tau shows up as its window
+    mean / J.  One value per pair of consecutive windows of the same trial is nearly
+    independent of the next, and far less noisy than a second derivative of the encoder
+    angle.  Defects further than 6 median absolute deviations from the median are dropped
+    (a window start caught in a wrong local minimum).
+
+    Returns (a (m,) [rad/s^2], window index w (m,), trial index (m,)).
+    """
+    x0 = problem.window_starts(z)
+    st = problem.starts
+    out, wins = [], []
+    for w in range(problem.n_windows - 1):
+        if problem.window_trial[w] != problem.window_trial[w + 1]:
+            continue
+        e = int(st[w + 1]) - 1
+        if e - 1 < st[w]:
+            continue
+        predicted = x2[e] + (x2[e] - x2[e - 1])      # one more step, at the last step's rate
+        out.append((x0[w + 1, 1] - predicted) / (problem.t[st[w + 1]] - problem.t[st[w]]))
+        wins.append(w)
+    a = np.asarray(out)
+    wins = np.asarray(wins, dtype=np.int64)
+    if a.size:
+        dev = np.abs(a - np.median(a))
+        keep = dev <= 6.0 * 1.4826 * max(float(np.median(dev)), 1e-12)
+        a, wins = a[keep], wins[keep]
+    return a, wins, problem.window_trial[wins] if wins.size else wins
+
+
+def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarray,
+                 trial_of: np.ndarray, freqs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Amplitude [rad/s^2] and p-value of a sinusoid along ``x`` (n,) in the defects ``a``.
+
+    Each defect is a window mean, so the regressors are the window means of cos and sin of
+    2 pi f x (the averaging over a window is then modelled exactly, not ignored); each trial
+    has its own intercept.  F test of the sinusoid against the intercepts alone."""
+    st = problem.starts
+    lengths = np.diff(st)[wins].astype(float)
+    trials = np.unique(trial_of)
+    D = (trial_of[:, None] == trials[None, :]).astype(float)
+    base_coef, *_ = np.linalg.lstsq(D, a, rcond=None)
+    rss0 = float(np.sum((a - D @ base_coef) ** 2))
+    n, k = a.size, D.shape[1] + 2
+    amp = np.zeros(freqs.size)
+    p = np.ones(freqs.size)
+    for i, f in enumerate(freqs):
+        ph = 2 * math.pi * f * x
+        c = np.add.reduceat(np.cos(ph), st[:-1])[wins] / lengths
+        s = np.add.reduceat(np.sin(ph), st[:-1])[wins] / lengths
+        X = np.column_stack([D, c, s])
+        coef, *_ = np.linalg.lstsq(X, a, rcond=None)
+        rss = float(np.sum((a - X @ coef) ** 2))
+        amp[i] = math.hypot(coef[-2], coef[-1])
+        if n > k and rss > 0:
+            F = ((rss0 - rss) / 2) / (rss / (n - k))
+            p[i] = float(stats.f.sf(F, 2, n - k))
+    return amp, p
+
+
 def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnostics:
     """Diagnostics of ``result`` (a fit of ``problem``)."""
     r = problem.residual(result.z)
@@ -243,35 +309,35 @@ def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnosti
         st = _bins(name, v[m], a[m])
         if st is not None:
             diag.structures[name] = st
-    # periodograms: along the unwrapped wheel angle and along time
+    # periodograms of the window defects: along the unwrapped wheel angle and along time
     L_over_r = problem.base.L / problem.base.r
-    span = max(float(np.ptp(x1[problem.trial_slices[i]])) for i in range(len(problem.trials)))
-    for axis, x, fmax, res in (("wheel_angle_unwrapped", x1, 4.0, span),
-                               ("time", axes["time"], 10.0,
-                                max(tr.duration for tr in problem.trials))):
-        if res <= 0 or valid.sum() < 100 * SG_WINDOW:
-            continue
-        step = 1.0 / (4.0 * res)
-        freqs = np.arange(2.0 / res, fmax, step)
-        sub = np.flatnonzero(valid)[::3]        # every third sample: a is smooth over 61
-        amp, fstat = _scan(x[sub], a[sub], freqs)
-        diag.spectra[axis] = (freqs, amp)
-        p = stats.f.sf(fstat, 2, max(sub.size / (SG_WINDOW / 3) - 2, 1))
-        order = np.argsort(-amp)
-        taken: list[float] = []
-        for i in order[:50]:
-            if p[i] > SIGNIFICANCE or amp[i] < MIN_AMPLITUDE:
-                continue
-            f = freqs[i]
-            if any(abs(f - g) < 3 * step for g in taken):
-                continue
-            taken.append(f)
-            period = 1.0 / f
-            turn = 2 * math.pi / period if axis != "time" else math.nan
-            lap = 2 * math.pi * L_over_r / period if axis != "time" else math.nan
-            diag.peaks.append(Peak(axis, period, float(amp[i]), float(p[i]), turn, lap))
-            if len(taken) >= 3:
-                break
+    acc, wins, trial_of = window_defects(problem, result.z, x2)
+    diag.defects = acc
+    if acc.size >= 20:
+        span = max(float(np.ptp(x1[problem.trial_slices[i]]))
+                   for i in range(len(problem.trials)))
+        duration = max(tr.duration for tr in problem.trials)
+        for axis, x, fmax, res in (("wheel_angle_unwrapped", x1, 1.0, span),
+                                   ("time", axes["time"], 0.45, duration)):
+            step = 1.0 / (4.0 * res)
+            freqs = np.arange(1.5 / res, fmax, step)
+            amp, p = _defect_scan(problem, x, acc, wins, trial_of, freqs)
+            diag.spectra[axis] = (freqs, amp)
+            order = np.argsort(p)
+            taken: list[float] = []
+            for i in order[:50]:
+                if p[i] > SIGNIFICANCE or amp[i] < MIN_AMPLITUDE:
+                    break
+                f = freqs[i]
+                if any(abs(f - g) < 3 * step for g in taken):
+                    continue
+                taken.append(f)
+                period = 1.0 / f
+                turn = 2 * math.pi / period if axis != "time" else math.nan
+                lap = 2 * math.pi * L_over_r / period if axis != "time" else math.nan
+                diag.peaks.append(Peak(axis, period, float(amp[i]), float(p[i]), turn, lap))
+                if len(taken) >= 3:
+                    break
     diag.signatures = signatures(diag, inertia)
     return diag
 
@@ -303,6 +369,14 @@ def signatures(diag: Diagnostics, inertia: float) -> list[Signature]:
                 f"rad/s^2 ({pk.amplitude * inertia:.2g} N*m)")
         out.append(Signature(axis, unit, period, pk.amplitude, pk.amplitude * inertia,
                              pk.p_value, text))
+    # several peaks that name the same period (leakage around one line) are one signature:
+    # keep the strongest (peaks come strongest first)
+    unique: list[Signature] = []
+    for sig in out:
+        if not any(u.axis == sig.axis and u.period is not None and sig.period is not None and
+                   abs(u.period - sig.period) <= 0.02 * u.period for u in unique):
+            unique.append(sig)
+    out = unique
     periodic_axes = {s.axis for s in out}
     for name, st in diag.structures.items():
         if st.p_value > SIGNIFICANCE or st.amplitude < MIN_AMPLITUDE or name in periodic_axes:

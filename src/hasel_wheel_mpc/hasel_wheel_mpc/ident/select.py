@@ -1,15 +1,25 @@
 """The whole identification: nominal fit, residual analysis, and the search for the missing
 effect with held-out validation by trial.
 
-Search (forward selection).  Starting from the nominal model, every candidate not yet in
-the model is added and the model refitted.  A candidate is accepted only when both hold:
+Search (forward selection).  Starting from the nominal model:
 
-* **held-out error**: the angle RMSE on trials left out of the fit (k-fold by trial, each
-  fold refitted) falls by at least ``min_gain`` (default 10 %) against the current model.
-  Cross-validation is the penalty for complexity: parameters that only fit noise do not
-  help on trials they never saw;
-* **significance**: its parameters differ from "no effect" by more than chance, a Wald
-  test  (x - x0)' C^-1 (x - x0) against chi^2 with p < 1e-6.
+1. **screen** every candidate not yet in the model: add it and refit by one Gauss-Newton
+   step, a score test (:mod:`.screen`).  Candidates whose predicted fall in squared error is
+   significant (p < ``SCREEN_P``) and that are predicted to cut the window RMSE by at least
+   half of ``min_gain`` go on, most promising first, up to ``max_refits`` of them, until
+   one is accepted;
+2. **refit** each of those to convergence and **cross-validate** it: the angle RMSE on
+   trials left out of the fit (k-fold by trial, each fold refitted).  A candidate is
+   accepted only when all hold:
+
+   * **fitted and held-out error** both fall by at least ``min_gain`` (default 10 %)
+     against the current model.  Cross-validation is the penalty for complexity:
+     parameters that only fit noise do not help on trials they never saw.  The fitted gain
+     asks that the effect explain a visible part of the error, not a sliver of a structure
+     that something outside the library causes (the tool then reports that structure
+     instead of forcing a wrong explanation);
+   * **significance**: its parameters differ from "no effect" by more than chance, a Wald
+     test  (x - x0)' C^-1 (x - x0) against chi^2 with p < 1e-6.
 
 The best accepted candidate joins the model and the search repeats, up to ``max_effects``.
 Whatever structure remains in the residual afterwards is reported as unexplained, with its
@@ -18,18 +28,26 @@ signature (:mod:`.residual`).
 from __future__ import annotations
 
 import math
+import time
+from typing import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import stats
 
+from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
-from .candidates import LIBRARY, Candidate
+from .candidates import BY_ID, LIBRARY, Candidate
 from .data import Trial
-from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction
+from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates
+from .metrics import TrialMetrics, pooled_rmse, trial_metrics
 from .residual import Diagnostics, analyse
+from .screen import Screening, screen
+
+
+SCREEN_P = 1e-6     # score-test p-value below which a candidate is refitted in full
 
 
 @dataclass
@@ -43,22 +61,59 @@ class Evaluation:
     wald_p: float = math.nan                # of the last added effect
     accepted: bool = False
     reason: str = ""
+    sim_fitted: dict[str, TrialMetrics] = field(default_factory=dict)   # free run, all-trial fit
+    sim_heldout: dict[str, TrialMetrics] = field(default_factory=dict)  # free run, fold fits
+    fold_values: dict[str, dict[str, float]] = field(default_factory=dict)  # trial -> its fold fit
+
+    @property
+    def sim_heldout_rmse(self) -> float:
+        """Held-out simulation error [rad/s] pooled over trials (Table III's metric)."""
+        return pooled_rmse(self.sim_heldout or self.sim_fitted)
 
 
 @dataclass
 class Identification:
+    """Everything the search found, in the order it found it."""
+
     friction: FrictionEstimate | None
     nominal: Evaluation
     final: Evaluation
     rounds: list[list[Evaluation]] = field(default_factory=list)
+    screenings: list[list[Screening]] = field(default_factory=list)
     diagnostics_before: Diagnostics | None = None
     diagnostics_after: Diagnostics | None = None
     problem_before: Problem | None = None
     problem_after: Problem | None = None
+    folds: list[list[int]] = field(default_factory=list)
+    trials: list[Trial] = field(default_factory=list)
+    base: WheelParams = field(default_factory=WheelParams)
+    window: float = 1.0
 
     @property
     def chosen(self) -> tuple[str, ...]:
         return self.final.effects
+
+    def problem(self, effects: tuple[str, ...]) -> Problem:
+        """The fit problem of the model nominal + ``effects`` on all trials."""
+        return Problem(self.trials, self.base, tuple(BY_ID[i] for i in effects), self.window)
+
+    def model(self) -> tuple[WheelParams, Extensions, list[str]]:
+        """The identified model as the plant and the MPC take it: (wheel parameters,
+        extensions, the chosen effects that have no field there and are left out)."""
+        prob = self.problem(self.chosen)
+        params = prob.wheel_params(prob.full_theta(self.final.fit.theta))
+        fields: dict = {}
+        left_out = []
+        i = prob.n_nominal
+        values = prob.full_theta(self.final.fit.theta)
+        for c in prob.candidates:
+            x = values[i:i + c.size]
+            i += c.size
+            if c.extension is None:
+                left_out.append(c.id)
+            else:
+                fields.update(c.extension(x))
+        return params, Extensions(**fields), left_out
 
 
 def folds_of(n_trials: int, k: int) -> list[list[int]]:
@@ -67,42 +122,57 @@ def folds_of(n_trials: int, k: int) -> list[list[int]]:
     return [list(range(i, n_trials, k)) for i in range(k)]
 
 
-def _fit(trials, base, effects, window, start, max_nfev=100) -> FitResult:
-    return Problem(trials, base, effects, window).fit(start=start, max_nfev=max_nfev)
+def _subset_starts(problem: Problem, z: np.ndarray, keep: list[int]) -> np.ndarray:
+    """(w', 2) the fitted window starts of the trials ``keep`` (windows never cross trials)."""
+    x0 = problem.window_starts(z)
+    return np.concatenate([x0[problem.trial_windows[i]] for i in keep])
 
 
 def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
-             window: float, start: dict[str, float], folds: list[list[int]]) -> Evaluation:
-    """Fit on all trials, then per fold on the rest, and score the held-out trials.
+             window: float, start: dict[str, float], folds: list[list[int]],
+             threads: int = 2, cv_below: float | None = None) -> Evaluation:
+    """Fit on all trials from ``start``, then per fold on the rest (warm-started from the
+    full fit), and score the held-out trials with their window starts re-solved.
 
-    The fit on all trials starts twice, from ``start`` (the current model) and from the
-    reference parameters, and keeps the better: a nominal model that bent its force law to
-    mimic a missing effect is a poor place to start looking for that effect."""
-    full = _fit(trials, base, effects, window, start)
-    if start:
-        fresh = _fit(trials, base, effects, window, {"tau_f": start["tau_f"]}
-                     if "tau_f" in start else {})
-        if fresh.rmse < full.rmse:
-            full = fresh
-    start = dict(start, **full.values)
-    per_trial: dict[str, float] = {}
+    With ``cv_below`` [rad], the folds are skipped (held-out error nan) when the fit on all
+    trials does not get its window RMSE below it: an effect that does not even fit the
+    data it saw cannot pass the held-out test."""
+    problem = Problem(trials, base, effects, window)
+    full = problem.fit(start=start)
+    x_full = problem.window_starts(full.z)
+    ev = Evaluation(tuple(c.id for c in effects), full, full.rmse, dict(full.per_trial_rmse))
+    for i, tr in enumerate(trials):
+        ev.sim_fitted[tr.name] = trial_metrics(problem, full.theta, tr,
+                                               x_full[problem.trial_windows[i][0]])
+    if len(trials) < 2 or (cv_below is not None and full.rmse > cv_below):
+        if len(trials) >= 2:
+            ev.heldout_rmse = math.nan
+        return ev
+
+    def one_fold(held: list[int]) -> tuple[list[int], Problem, np.ndarray, np.ndarray,
+                                            np.ndarray, dict[str, float]]:
+        train = [i for i in range(len(trials)) if i not in held]
+        pf = Problem([trials[i] for i in train], base, effects, window)
+        f = pf.fit(start=full.values, x0=_subset_starts(problem, full.z, train), max_nfev=30)
+        pt = Problem([trials[i] for i in held], base, effects, window)
+        theta = np.array([f.values[nm] for nm in pt.names])
+        x, r, _, _ = pt.solve_starts(pt.full_theta(theta), _subset_starts(problem, full.z, held))
+        return held, pt, theta, x, r, f.values
+
     sq = n = 0.0
-    if len(trials) > 1:
-        for held in folds:
-            train = [t for i, t in enumerate(trials) if i not in held]
-            test = [t for i, t in enumerate(trials) if i in held]
-            f = _fit(train, base, effects, window, start, max_nfev=30)
-            pt = Problem(test, base, effects, window)
-            theta = np.array([f.values[nm] for nm in pt.names])
-            _, r, _, _ = pt.solve_starts(pt.full_theta(theta), pt.initial_starts())
-            for tr, s in zip(test, pt.trial_slices):
+    with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
+        for held, pt, theta, x, r, values in pool.map(one_fold, folds):
+            for j, (i, s) in enumerate(zip(held, pt.trial_slices)):
+                tr = trials[i]
                 rr = r[s][pt.ok[s]]
-                per_trial[tr.name] = float(np.sqrt(np.mean(rr ** 2)))
+                ev.heldout_per_trial[tr.name] = float(np.sqrt(np.mean(rr ** 2)))
                 sq += float(rr @ rr)
                 n += rr.size
-    heldout = math.sqrt(sq / n) if n else full.rmse
-    return Evaluation(tuple(c.id for c in effects), full, heldout, per_trial or
-                      dict(full.per_trial_rmse))
+                ev.sim_heldout[tr.name] = trial_metrics(pt, theta, tr,
+                                                        x[pt.trial_windows[j][0]])
+                ev.fold_values[tr.name] = dict(values)
+    ev.heldout_rmse = math.sqrt(sq / n)
+    return ev
 
 
 def wald_p(fit: FitResult, effect: Candidate) -> float:
@@ -128,48 +198,84 @@ def _null_value(effect: Candidate, name: str) -> float:
 
 def identify(trials: list[Trial], base: WheelParams | None = None,
              library: tuple[Candidate, ...] = LIBRARY, window: float = 1.0, k_folds: int = 5,
-             min_gain: float = 0.10, max_effects: int = 2, threads: int = 2,
-             analyse_residuals: bool = True) -> Identification:
-    """Run the whole identification on ``trials`` (see the module docstring)."""
+             min_gain: float = 0.10, max_effects: int = 2, max_refits: int = 2,
+             threads: int = 2, analyse_residuals: bool = True,
+             progress: Callable[[str], None] | None = None) -> Identification:
+    """Run the whole identification on ``trials`` (see the module docstring).
+
+    ``progress`` (e.g. ``print``) gets one line per step with the elapsed wall time."""
+    t_start = time.perf_counter()
+
+    def say(text: str) -> None:
+        if progress is not None:
+            progress(f"[{time.perf_counter() - t_start:6.1f} s] {text}")
+
     base = base or WheelParams()
     friction = coastdown_friction(trials, base)
     start = {"tau_f": friction.tau_f} if friction else {}
     folds = folds_of(len(trials), k_folds)
-    current = evaluate(trials, base, (), window, start, folds)
+    say(f"tau_f from coast-downs: {friction.tau_f:.6f} N*m" if friction else
+        "no coast-down: tau_f is fitted with the force law")
+    current = evaluate(trials, base, (), window, start, folds, threads)
+    say(f"nominal model: window RMSE {1e3 * current.fit.rmse:.3f} mrad, held-out "
+        f"{1e3 * current.heldout_rmse:.3f} mrad ({current.fit.nfev} evaluations)")
     current.accepted, current.reason = True, "nominal model"
     nominal = current
     chosen: tuple[Candidate, ...] = ()
-    rounds: list[list[Evaluation]] = []
+    ident = Identification(friction, nominal, current, folds=folds, trials=list(trials),
+                           base=base, window=window)
+    reference = dict(start, **{k: v for k, v in force_coordinates(base).items()})
+    if friction is None:
+        reference.pop("tau_f", None)
     for _ in range(max_effects):
         todo = [c for c in library if c not in chosen]
         if not todo:
             break
-        st = dict(start, **current.fit.values)
+        problem = Problem(trials, base, chosen, window)
+        ref = dict(reference, tau_f=current.fit.values.get("tau_f", base.tau_f))
 
-        def run(c: Candidate) -> Evaluation:
-            ev = evaluate(trials, base, chosen + (c,), window, st, folds)
-            ev.wald_p = wald_p(ev.fit, c) if c.id != "charge_retention" else \
-                _retention_p(ev.fit)
-            gain = 1.0 - ev.heldout_rmse / current.heldout_rmse
-            ok_gain = gain >= min_gain
-            ok_sig = ev.wald_p < 1e-6
-            ev.accepted = ok_gain and ok_sig
-            ev.reason = (f"held-out RMSE {1e3 * ev.heldout_rmse:.3f} mrad vs "
-                         f"{1e3 * current.heldout_rmse:.3f} ({100 * gain:+.1f} %, need "
-                         f"{100 * min_gain:.0f} %); Wald p = {ev.wald_p:.1e} (need < 1e-6)")
-            return ev
+        def score(c: Candidate) -> Screening:
+            return screen(trials, base, chosen, current.fit, problem, c, window, ref)
 
         with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
-            evs = list(pool.map(run, todo))
-        rounds.append(evs)
+            scores = list(pool.map(score, todo))
+        ident.screenings.append(scores)
+        say("screened: " + ", ".join(f"{s.candidate} chi2 {s.statistic:.0f}" for s in scores))
+        # significant, and predicted to explain a visible part of the error: the linearised
+        # step may underestimate a nonlinear effect, so half the gain finally required
+        need = (1.0 - 0.5 * min_gain) * current.fit.rmse
+        promising = sorted((s for s in scores if s.p_value < SCREEN_P and
+                            s.predicted_rmse <= need),
+                           key=lambda s: s.predicted_rmse)[:max_refits]
+        evs = []
+        for sc in promising:
+            c = BY_ID[sc.candidate]
+            ev = evaluate(trials, base, chosen + (c,), window, sc.start, folds, threads,
+                          cv_below=(1.0 - min_gain) * current.fit.rmse)
+            ev.wald_p = wald_p(ev.fit, c) if c.id != "charge_retention" else \
+                _retention_p(ev.fit)
+            fitted_gain = 1.0 - ev.fit.rmse / current.fit.rmse
+            gain = 1.0 - ev.heldout_rmse / current.heldout_rmse
+            ev.accepted = bool(fitted_gain >= min_gain and gain >= min_gain and ev.wald_p < 1e-6)
+            ev.reason = (f"window RMSE {1e3 * ev.fit.rmse:.3f} mrad vs "
+                         f"{1e3 * current.fit.rmse:.3f} ({100 * fitted_gain:+.1f} %), held-out "
+                         f"{1e3 * ev.heldout_rmse:.3f} mrad vs {1e3 * current.heldout_rmse:.3f} "
+                         f"({100 * gain:+.1f} %), need {100 * min_gain:.0f} % on both; Wald p = "
+                         f"{ev.wald_p:.1e} (need < 1e-6)")
+            evs.append(ev)
+            say(f"+ {c.id}: {'accepted' if ev.accepted else 'refused'}: {ev.reason}")
+            if ev.accepted:
+                break       # the next round screens the rest again, against this model
+        ident.rounds.append(evs)
         good = [e for e in evs if e.accepted]
         if not good:
             break
         best = min(good, key=lambda e: e.heldout_rmse)
-        chosen = tuple(next(c for c in library if c.id == i) for i in best.effects)
+        chosen = tuple(BY_ID[i] for i in best.effects)
         current = best
-    ident = Identification(friction, nominal, current, rounds)
+    ident.final = current
     if analyse_residuals:
+        say("residual analysis")
         ident.problem_before = Problem(trials, base, (), window)
         ident.diagnostics_before = analyse(ident.problem_before, nominal.fit)
         ident.problem_after = Problem(trials, base, chosen, window)

@@ -47,19 +47,22 @@ def _rk4(x1: float, x2: float, h: float, q: float, eta: float, phi_a: float, gai
 
 
 @jit
-def shoot(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
-          on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray, x0: np.ndarray,
-          pv: np.ndarray, out1: np.ndarray, out2: np.ndarray) -> None:
-    """Multiple-shooting simulation with measured switching.
+def shoot_windows(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
+                  on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray,
+                  windows: np.ndarray, x0: np.ndarray, pv: np.ndarray, out1: np.ndarray,
+                  out2: np.ndarray) -> None:
+    """Multiple-shooting simulation with measured switching, of the listed windows only.
 
     t (n,) [s]; q (n,) 0/1; eta (n,) unwrapped sector of the actuator of interest (float, may
     carry a fractional angle offset); phi_a (n,) [rad] activation angle in effect; on_time (n,)
     [s] time since the active actuator switched on; gain (n,) force multiplier of the active
-    actuator; starts (w+1,) sample index where each window starts (last = n); x0 (w, 2) initial
-    (xi1 [rad], xi2 [rad/s]) of each window; pv the model's parameter vector.
-    Writes xi1 into out1 (n,) and xi2 into out2 (n,).
+    actuator; starts (w+1,) sample index where each window starts (last = n); windows (m,)
+    indices of the windows to simulate; x0 (w, 2) initial (xi1 [rad], xi2 [rad/s]) of each
+    window; pv the model's parameter vector.  Writes xi1 into out1 (n,) and xi2 into out2 (n,)
+    over the listed windows and leaves the other samples alone.
     """
-    for w in range(starts.shape[0] - 1):
+    for i in range(windows.shape[0]):
+        w = windows[i]
         a = starts[w]
         b = starts[w + 1]
         x1 = x0[w, 0]
@@ -71,6 +74,15 @@ def shoot(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
                           on_time[k], pv)
             out1[k + 1] = x1
             out2[k + 1] = x2
+
+
+@jit
+def shoot(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
+          on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray, x0: np.ndarray,
+          pv: np.ndarray, out1: np.ndarray, out2: np.ndarray) -> None:
+    """:func:`shoot_windows` of every window: out1, out2 (n,) get xi1 [rad], xi2 [rad/s]."""
+    shoot_windows(t, q, eta, phi_a, on_time, gain, starts,
+                  np.arange(starts.shape[0] - 1), x0, pv, out1, out2)
 
 
 @jit_inline
