@@ -1,0 +1,313 @@
+"""The identification report: ``report.md`` with PNG figures, ``report.json`` for machines,
+and ``model.yaml``, the identified model that the sim and the MPC load.
+
+``report.json`` (schema ``hasel_wheel.identification/1``); every key below is always present:
+
+=========================  ===============================================================
+schema                     "hasel_wheel.identification/1"
+trials                     [{name, source, duration_s, samples, activations, coasts}]
+friction                   {tau_f_N_m, ci95_N_m: [lo, hi], segments} or null (no coast-down)
+nominal                    {parameters: {name: {value, unit, ci95: [lo, hi]}},
+                            wheel: {sigma1..sigma6, tau_f, brake_gain}}
+chosen_effects             [stable identifier, ...] in the order chosen; [] when none
+effects                    [{id, title, parameters: {name: {value, unit, ci95}},
+                            physical: {...}, wald_p}] for the chosen ones
+candidates                 [{round, id, score_statistic, score_dof, score_p,
+                            predicted_window_rmse_rad, refitted, window_rmse_rad,
+                            heldout_window_rmse_rad (null: not cross-validated, the fit
+                            itself was not 10 % better), wald_p, accepted, reason}]
+unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p_value,
+                            text}] structure left in the final model's residual; [] when none
+metrics                    {before: M, after: M}, M = {window_rmse_rad, heldout_window_rmse_rad,
+                            simulation: {pooled_fitted_rmse_rad_s, pooled_heldout_rmse_rad_s,
+                            per_trial: {name: {fitted: T, heldout: T}}}},
+                            T = {rmse, r2, nrmse, steady_state_error, samples} (rad/s, 1)
+diagnostics                {before: D, after: D}, D = {whiteness_outside, band99,
+                            input_correlation_max, rms_accel_rad_s2, structures:
+                            {axis: {p_value, amplitude_rad_s2}}}
+paper_table3               {phi_a_deg: {rmse_m_s, r2, ess_m_s}}
+model_file                 "model.yaml"; left_out_effects: chosen effects the file cannot hold
+figures                    [file names]
+=========================  ===============================================================
+
+The stable effect identifiers are those of :mod:`.candidates` (README, "Identification").
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from hasel_wheel_sim.model_file import save_model
+
+from . import plots
+from .candidates import BY_ID
+from .data import find_coasts
+from .metrics import PAPER_TABLE3, TrialMetrics, pooled_rmse
+from .residual import Diagnostics
+from .select import Evaluation, Identification
+
+SCHEMA = "hasel_wheel.identification/1"
+
+
+def _num(v):
+    """JSON-safe number: nan and inf become null."""
+    if v is None:
+        return None
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _params(ev: Evaluation, names: list[str] | None = None) -> dict:
+    fit = ev.fit
+    out = {}
+    for nm, unit in zip(fit.names, fit.units):
+        if names is not None and nm not in names:
+            continue
+        out[nm] = {"value": _num(fit.values[nm]), "unit": unit,
+                   "ci95": [_num(fit.ci95[nm][0]), _num(fit.ci95[nm][1])]}
+    return out
+
+
+def _metrics(ev: Evaluation) -> dict:
+    def t(m: TrialMetrics | None):
+        return None if m is None else {k: (_num(v) if k != "trial" else v)
+                                       for k, v in m.as_dict().items() if k != "trial"}
+    return {
+        "window_rmse_rad": _num(ev.fit.rmse),
+        "heldout_window_rmse_rad": _num(ev.heldout_rmse),
+        "simulation": {
+            "pooled_fitted_rmse_rad_s": _num(pooled_rmse(ev.sim_fitted)),
+            "pooled_heldout_rmse_rad_s": _num(pooled_rmse(ev.sim_heldout))
+            if ev.sim_heldout else None,
+            "per_trial": {name: {"fitted": t(m), "heldout": t(ev.sim_heldout.get(name))}
+                          for name, m in ev.sim_fitted.items()},
+        },
+    }
+
+
+def _diagnostics(d: Diagnostics | None) -> dict | None:
+    if d is None:
+        return None
+    return {"whiteness_outside": _num(d.whiteness_outside), "band99": _num(d.band99),
+            "input_correlation_max": _num(d.input_correlation_max),
+            "rms_accel_rad_s2": _num(d.rms_accel),
+            "structures": {k: {"p_value": _num(s.p_value), "amplitude_rad_s2": _num(s.amplitude)}
+                           for k, s in d.structures.items()}}
+
+
+def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> dict:
+    """The report as a JSON-ready dict (keys in the module docstring)."""
+    nominal_names = ident.nominal.fit.names
+    fr = ident.friction
+    wheel = ident.nominal.fit.params
+    chosen = []
+    for cid in ident.chosen:
+        c = BY_ID[cid]
+        x = np.array([ident.final.fit.values[p.name] for p in c.params])
+        ev = next((e for rd in ident.rounds for e in rd if e.effects[-1] == cid and e.accepted),
+                  ident.final)
+        chosen.append({"id": cid, "title": c.title,
+                       "parameters": _params(ident.final, [p.name for p in c.params]),
+                       "physical": c.describe(x), "wald_p": _num(ev.wald_p)})
+    candidates = []
+    for k, scs in enumerate(ident.screenings):
+        evs = {e.effects[-1]: e for e in (ident.rounds[k] if k < len(ident.rounds) else [])}
+        for s in scs:
+            e = evs.get(s.candidate)
+            candidates.append({
+                "round": k + 1, "id": s.candidate, "score_statistic": _num(s.statistic),
+                "score_dof": s.dof, "score_p": _num(s.p_value),
+                "predicted_window_rmse_rad": _num(s.predicted_rmse), "refitted": e is not None,
+                "window_rmse_rad": _num(e.fit.rmse) if e else None,
+                "heldout_window_rmse_rad": _num(e.heldout_rmse) if e else None,
+                "wald_p": _num(e.wald_p) if e else None,
+                "accepted": bool(e.accepted) if e else False,
+                "reason": e.reason if e else "score test not significant"
+                if s.p_value >= 1e-6 else "significant, but others were more promising"})
+    after = ident.diagnostics_after
+    return {
+        "schema": SCHEMA,
+        "trials": [{"name": tr.name, "source": tr.source, "duration_s": _num(tr.duration),
+                    "samples": int(tr.t.shape[0]), "activations": len(tr.activations),
+                    "coasts": len(find_coasts(tr))} for tr in ident.trials],
+        "friction": None if fr is None else {"tau_f_N_m": fr.tau_f,
+                                             "ci95_N_m": list(fr.ci95), "segments": fr.segments},
+        "nominal": {"parameters": _params(ident.nominal, nominal_names),
+                    "wheel": {k: _num(getattr(wheel, k)) for k in
+                              ("sigma1", "sigma2", "sigma3", "sigma4", "sigma5", "sigma6",
+                               "tau_f", "brake_gain")}},
+        "chosen_effects": list(ident.chosen),
+        "effects": chosen,
+        "candidates": candidates,
+        "unexplained": [] if after is None else [
+            {"axis": s.axis, "unit": s.unit, "period": _num(s.period),
+             "amplitude_rad_s2": _num(s.amplitude), "torque_N_m": _num(s.torque),
+             "p_value": _num(s.p_value), "text": s.text} for s in after.signatures],
+        "metrics": {"before": _metrics(ident.nominal), "after": _metrics(ident.final)},
+        "diagnostics": {"before": _diagnostics(ident.diagnostics_before),
+                        "after": _diagnostics(after)},
+        "paper_table3": {str(k): {"rmse_m_s": v[0], "r2": v[1], "ess_m_s": v[2]}
+                         for k, v in PAPER_TABLE3.items()},
+        "model_file": "model.yaml",
+        "left_out_effects": left_out,
+        "figures": figures,
+    }
+
+
+def _ci(ci: list) -> str:
+    """An interval for the Markdown; null ends (infinite variance) mean undetermined."""
+    if ci[0] is None or ci[1] is None:
+        return "not determined by the data"
+    return f"{ci[0]:.5g} … {ci[1]:.5g}"
+
+
+def _table3_rows(ev_before: Evaluation, ev_after: Evaluation, r: float) -> list[str]:
+    rows = ["| trial | paper φa | paper RMSE [m/s] | paper R² | nominal RMSE fitted / held-out "
+            "[m/s] | nominal R² (held-out) | identified RMSE fitted / held-out [m/s] | "
+            "identified R² (held-out) | e_ss nominal / identified [m/s] |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for name, mb in ev_before.sim_fitted.items():
+        ma = ev_after.sim_fitted[name]
+        hb = ev_before.sim_heldout.get(name, mb)
+        ha = ev_after.sim_heldout.get(name, ma)
+        deg = _phi_a_deg(name)
+        paper = PAPER_TABLE3.get(deg) if deg is not None else None
+        pr = f"{paper[0]:.2f} | {paper[1]:.2f}" if paper else "– | –"
+        rows.append(f"| {name} | {deg if deg is not None else '–'} | {pr} | "
+                    f"{r * mb.rmse:.3f} / {r * hb.rmse:.3f} | {hb.r2:.3f} | "
+                    f"{r * ma.rmse:.3f} / {r * ha.rmse:.3f} | {ha.r2:.3f} | "
+                    f"{r * hb.steady_state_error:+.3f} / {r * ha.steady_state_error:+.3f} |")
+    return rows
+
+
+def _phi_a_deg(name: str) -> int | None:
+    """The activation angle in a trial name like 'phi_a_3deg' (the synthetic trials')."""
+    import re
+    m = re.search(r"phi_a_(\d+)deg", name)
+    return int(m.group(1)) if m else None
+
+
+def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = None) -> str:
+    """The human-readable report (figures referenced by file name)."""
+    r = ident.base.r
+    nb, na = ident.nominal, ident.final
+    L: list[str] = ["# Identification report", ""]
+    L += [f"{len(ident.trials)} trials, {sum(t['duration_s'] for t in data['trials']):.0f} s in "
+          f"all; held-out validation by trial over {len(ident.folds)} folds.", ""]
+    L += ["## Result", ""]
+    if ident.chosen:
+        L += [f"**Chosen effect(s): {', '.join('`' + c + '`' for c in ident.chosen)}.**", ""]
+        for e in data["effects"]:
+            ps = ", ".join(f"{k} = {v['value']:.4g} {v['unit']} (95 % CI {_ci(v['ci95'])})"
+                           for k, v in e["parameters"].items())
+            phys = ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
+                             for k, v in e["physical"].items() if k != "gains")
+            L += [f"* `{e['id']}` ({e['title']}): {ps}; {phys}; Wald p = {e['wald_p']:.1e}"]
+        L += [""]
+    else:
+        L += ["**No candidate effect is supported by the data; the paper's model is kept.**", ""]
+    if data["unexplained"]:
+        L += ["Structure the model does **not** explain (no candidate in the library fits it):", ""]
+        L += [f"* {u['text']} (p = {u['p_value']:.1e})" for u in data["unexplained"]] + [""]
+    else:
+        L += ["No significant structure is left in the residual.", ""]
+    if data["left_out_effects"]:
+        L += [f"Not carried into `model.yaml` (the plant and the MPC have no such field): "
+              f"{', '.join(data['left_out_effects'])}.", ""]
+    L += ["## Error before and after", "",
+          f"Window (multiple-shooting, 1 s windows) angle RMSE: nominal {1e3 * nb.fit.rmse:.3f} "
+          f"mrad fitted, {1e3 * nb.heldout_rmse:.3f} mrad held-out → identified "
+          f"{1e3 * na.fit.rmse:.3f} / {1e3 * na.heldout_rmse:.3f} mrad.", "",
+          f"Simulation error (free run with model switching, speed; the paper's Table III "
+          f"metric), pooled: nominal {pooled_rmse(nb.sim_fitted):.4f} rad/s fitted, "
+          f"{nb.sim_heldout_rmse:.4f} rad/s held-out → identified "
+          f"{pooled_rmse(na.sim_fitted):.4f} / {na.sim_heldout_rmse:.4f} rad/s.", "",
+          f"Per trial, as linear speed (× r = {r} m) next to the paper's Table III:", ""]
+    L += _table3_rows(nb, na, r) + [""]
+    L += ["![speed](speed_fit.png)", ""]
+    L += ["## Friction and nominal force law", ""]
+    if ident.friction:
+        fr = ident.friction
+        L += [f"τf = {fr.tau_f:.6f} N·m (95 % CI {fr.ci95[0]:.6f} … {fr.ci95[1]:.6f}) from "
+              f"{fr.segments} coast-downs.", ""]
+    else:
+        L += ["No coast-down found: τf is fitted with the force law.", ""]
+    L += ["| parameter | nominal | 95 % CI | identified model |", "|---|---|---|---|"]
+    for k, v in data["nominal"]["parameters"].items():
+        after = na.fit.values.get(k, math.nan)
+        L += [f"| {k} [{v['unit']}] | {v['value']:.5g} | {_ci(v['ci95'])} | {after:.5g} |"]
+    L += ["", "The fit works in the coordinates the data determines (peak, centre, width, "
+          "b = σ2/σ3, τf). σ1, σ4, σ6 trade off along one direction and σ2, σ3, σ6 along "
+          "another (model-notes.md), so σ1 and σ3 stay at their reference values.", ""]
+    if data.get("identifiability"):
+        L += ["Identifiability (singular values of the data's sensitivity to the paper's "
+              "parameters, relative):", "", "```"] + data["identifiability"] + ["```", ""]
+    L += ["## Candidate effects", "",
+          "Every candidate is added to the model and refitted by one Gauss-Newton step "
+          "(score test); the most promising significant ones are refitted to convergence and "
+          "cross-validated by trial. Accepted: fitted and held-out window error both down "
+          "≥ 10 %, and Wald p < 1e-6.",
+          "", "| round | candidate | score χ² (dof) | p | refitted: window RMSE fitted / "
+          "held-out [mrad] | Wald p | verdict |", "|---|---|---|---|---|---|---|"]
+    for c in data["candidates"]:
+        ho = "–"
+        if c["refitted"]:
+            held = c["heldout_window_rmse_rad"]
+            ho = (f"{1e3 * c['window_rmse_rad']:.3f} / " +
+                  (f"{1e3 * held:.3f}" if held is not None else "not cross-validated"))
+        wp = f"{c['wald_p']:.1e}" if c["wald_p"] is not None else "–"
+        verdict = "**accepted**" if c["accepted"] else c["reason"]
+        L += [f"| {c['round']} | `{c['id']}` | {c['score_statistic']:.1f} ({c['score_dof']}) | "
+              f"{c['score_p']:.1e} | {ho} | {wp} | {verdict} |"]
+    L += ["", "![evidence](evidence.png)", ""]
+    L += ["## Residual diagnostics", ""]
+    for label, d in (("nominal", ident.diagnostics_before), ("identified", ident.diagnostics_after)):
+        if d is None:
+            continue
+        L += [f"* {label}: {100 * d.whiteness_outside:.0f} % of autocorrelation lags outside "
+              f"the 99 % band (whiteness); max |cross-correlation with q| "
+              f"{d.input_correlation_max:.3f} (band {d.band99:.3f}); acceleration residual "
+              f"RMS {d.rms_accel:.3f} rad/s²"]
+        for s in d.signatures:
+            L += [f"  * {s.text}"]
+    L += ["", "![correlation](correlation.png)", "", "![structure](structure.png)", "",
+          "![spectra](spectra.png)", ""]
+    if closed_loop:
+        L += ["## Closed loop: nominal vs identified model in the controller", "",
+              "| controller model | tracking RMSE [rad/s] | NRMSE |", "|---|---|---|"]
+        for name, m in closed_loop.items():
+            L += [f"| {name} | {m['rmse']:.4f} | {m['nrmse']:.4f} |"]
+        L += [""]
+    return "\n".join(L) + "\n"
+
+
+def write_report(ident: Identification, out: Path | str, identifiability: list[str] | None = None,
+                 closed_loop: dict | None = None, provenance: dict | None = None) -> dict:
+    """Write report.md, report.json, the figures and model.yaml under ``out``; returns the
+    JSON dict."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    figures = [plots.speed_fits(ident, out), plots.evidence(ident, out)]
+    if ident.diagnostics_before is not None:
+        figures += [plots.correlations(ident.diagnostics_before, ident.diagnostics_after, out),
+                    plots.structure(ident.diagnostics_before, ident.diagnostics_after, out),
+                    plots.spectra(ident.diagnostics_before, ident.diagnostics_after, out)]
+    params, ext, left_out = ident.model()
+    save_model(out / "model.yaml", params, ext,
+               dict(provenance or {}, tool="hasel_wheel identify",
+                    chosen_effects=list(ident.chosen), left_out_effects=left_out))
+    data = to_json(ident, figures, left_out)
+    if identifiability:
+        data["identifiability"] = identifiability
+    if closed_loop:
+        data["closed_loop"] = {name: {"rmse_rad_s": _num(m["rmse"]), "nrmse": _num(m["nrmse"]),
+                                      "segment_steady_error_percent":
+                                          [_num(v) for v in m["segment_steady_error"]],
+                                      "decisions": m["decisions"], "braking": m["braking"]}
+                               for name, m in closed_loop.items()}
+    (out / "report.json").write_text(json.dumps(data, indent=2, sort_keys=False) + "\n")
+    (out / "report.md").write_text(to_markdown(ident, data, closed_loop))
+    return data
