@@ -30,7 +30,7 @@ from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, int_param, qos_profile, text_param)
 from hasel_wheel_sim.model import SECTOR
-from hasel_wheel_sim.model_file import controller_model
+from hasel_wheel_sim.model_file import controller_model, describe_model
 
 from .mpc import Mpc, MpcConfig
 
@@ -133,7 +133,8 @@ class MpcNode(Node):
         self.create_timer(period, self._on_diagnostics)
         self.get_logger().info(
             f"ready: MPC, reference {self.reference:g} rad/s, {len(self.mpc.cands)} coarse "
-            f"candidates, brake threshold {config.brake_threshold:g} rad/s")
+            f"candidates, brake threshold {config.brake_threshold:g} rad/s; "
+            + describe_model(wheel_file, model_file, ext))
 
     # -- parameters ---------------------------------------------------------------------------
     def _on_set_parameters(self, params) -> SetParametersResult:

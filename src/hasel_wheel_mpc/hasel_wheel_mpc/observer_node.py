@@ -26,7 +26,7 @@ from rclpy.node import Node
 from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
                                                   float_param, qos_profile, text_param)
-from hasel_wheel_sim.model_file import controller_model
+from hasel_wheel_sim.model_file import controller_model, describe_model
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .disturbance import IntegralEstimator
@@ -134,7 +134,8 @@ class ObserverNode(Node):
         self.create_timer(period, self._on_diagnostics)
         self.get_logger().info(
             f"ready: observer on {topics.TELEMETRY.name} -> {topics.STATE_ESTIMATE.name}; "
-            "estimator " + (f"{mode}, K = {gain:g}" if self.est else "off"))
+            "estimator " + (f"{mode}, K = {gain:g}" if self.est else "off") + "; " +
+            describe_model(wheel_file, model_file, ext))
 
     # -- parameters ---------------------------------------------------------------------------
     def _estimator_settings(self, params) -> tuple[float, str, float]:

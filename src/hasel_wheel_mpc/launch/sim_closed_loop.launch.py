@@ -1,6 +1,7 @@
 """The closed speed loop on the simulated wheel: sim -> observer -> MPC -> sim.
 
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py [namespace:=wheel0] [time_scale:=1.0]
+    ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py controller_model_file:=out/identify/model.yaml
     ros2 topic pub --once reference_speed std_msgs/msg/Float64 "{data: 1.5}"
     ros2 param set /mpc_node reference_speed 2.0
 
@@ -16,6 +17,7 @@ from launch.event_handlers import OnProcessIO
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
 READY = b"ready:"
@@ -43,17 +45,20 @@ def generate_launch_description():
     share = FindPackageShare("hasel_wheel_mpc")
     sim_share = FindPackageShare("hasel_wheel_sim")
     namespace = LaunchConfiguration("namespace")
+    controller_model = {"model_file": ParameterValue(LaunchConfiguration("controller_model_file"),
+                                                     value_type=str)}
     observer = Node(package="hasel_wheel_mpc", executable="observer_node", name="observer_node",
                     namespace=namespace, output="screen",
-                    parameters=[LaunchConfiguration("observer_params_file")])
+                    parameters=[LaunchConfiguration("observer_params_file"), controller_model])
     mpc = Node(package="hasel_wheel_mpc", executable="mpc_node", name="mpc_node",
                namespace=namespace, output="screen",
-               parameters=[LaunchConfiguration("mpc_params_file")])
+               parameters=[LaunchConfiguration("mpc_params_file"), controller_model])
     sim = IncludeLaunchDescription(
         PythonLaunchDescriptionSource(PathJoinSubstitution([sim_share, "launch", "sim.launch.py"])),
         launch_arguments={"namespace": namespace,
                           "plant_file": LaunchConfiguration("plant_file"),
-                          "time_scale": LaunchConfiguration("time_scale")}.items())
+                          "time_scale": LaunchConfiguration("time_scale"),
+                          "model_file": LaunchConfiguration("plant_model_file")}.items())
     return LaunchDescription([
         DeclareLaunchArgument("namespace", default_value="",
                               description="namespace of the wheel's topics and nodes ('' = root)"),
@@ -63,6 +68,13 @@ def generate_launch_description():
                               description="plant YAML of the simulator (seed, switching, effects)"),
         DeclareLaunchArgument("time_scale", default_value="1.0",
                               description="simulated seconds per wall second"),
+        DeclareLaunchArgument("controller_model_file", default_value="",
+                              description="model file for the observer and the MPC, e.g. "
+                                          "hasel_wheel identify's model.yaml ('' = paper model)"),
+        DeclareLaunchArgument("plant_model_file", default_value="",
+                              description="model file as the simulated plant's dynamics (then "
+                                          "pass plant_file:=.../plant.yaml: sensor/link "
+                                          "effects only); '' = plant_file's effects"),
         DeclareLaunchArgument("observer_params_file",
                               default_value=PathJoinSubstitution([share, "config",
                                                                   "observer.yaml"]),

@@ -168,3 +168,16 @@ def save_model(path: str | Path, params: WheelParams, ext: Extensions,
               "# extensions of hasel_wheel_sim.model.Extensions, and where they came from.\n"
               "# SI units, angles in rad; every value is {value, unit}.\n")
     Path(path).write_text(header + text, encoding="utf-8")
+
+
+def describe_model(wheel_params_file: str, model_file: str, ext: Extensions) -> str:
+    """One log line naming where a node's model came from and its non-default extensions."""
+    source = model_file or wheel_params_file or "built-in paper values"
+    default = Extensions()
+    changed = [f"{name}={getattr(ext, name):.4g}" for name in
+               ("com_torque", "com_phase", "platform_torque", "platform_phase", "viscous",
+                "rise_time", "retention_rate", "retention_recovery")
+               if getattr(ext, name) != getattr(default, name)]
+    if tuple(ext.gains) != tuple(default.gains):
+        changed.append(f"gains {min(ext.gains):.3f}..{max(ext.gains):.3f}")
+    return f"model {source}" + (f" ({', '.join(changed)})" if changed else "")

@@ -3,6 +3,7 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
 
@@ -19,9 +20,15 @@ def generate_launch_description():
                               description="plant YAML (seed, switching, effects)"),
         DeclareLaunchArgument("time_scale", default_value="1.0",
                               description="simulated seconds per wall second"),
+        DeclareLaunchArgument("model_file", default_value="",
+                              description="model file (e.g. hasel_wheel identify's model.yaml) "
+                                          "as the plant's dynamics; then plant_file may hold "
+                                          "sensor/link effects only ('' = not used)"),
         Node(package="hasel_wheel_sim", executable="sim_node", name="sim",
              namespace=LaunchConfiguration("namespace"), output="screen",
              parameters=[LaunchConfiguration("params_file"),
                          {"plant_file": LaunchConfiguration("plant_file"),
-                          "time_scale": LaunchConfiguration("time_scale")}]),
+                          "time_scale": LaunchConfiguration("time_scale"),
+                          "model_file": ParameterValue(LaunchConfiguration("model_file"),
+                                                       value_type=str)}]),
     ])

@@ -189,3 +189,10 @@ def test_sim_node_plant_from_a_model_file(tmp_path):
     assert params == PARAMS and cfg.effects.extensions() == EXT and cfg.switching == "exact"
     with pytest.raises(ParameterError, match=r"plant_realistic.yaml: plant.effects: \['charge_retention'"):
         load_plant_model(wheel, realistic, str(f))
+
+
+def test_describe_model_names_the_source_and_what_differs_from_the_paper():
+    from hasel_wheel_sim.model_file import describe_model
+    assert describe_model("", "", Extensions()) == "model built-in paper values"
+    line = describe_model("", "/tmp/m.yaml", Extensions(com_torque=0.004, com_phase=0.5))
+    assert line == "model /tmp/m.yaml (com_torque=0.004, com_phase=0.5)"
