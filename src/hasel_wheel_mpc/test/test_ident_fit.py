@@ -57,3 +57,29 @@ def test_identifiability_finds_both_structural_null_directions(nominal_trials):
         resid = v - null.T @ (null @ v)
         assert np.linalg.norm(resid) < 1e-3
     assert len(ident.undetermined()) == 2
+
+
+def test_the_paper_trial_set_is_recovered_through_the_encoder():
+    # the paper's five trials (phi_a 1..9 deg, 50 s + 10 s coast): taking each encoder
+    # reading as the angle biased the peak by +5.5 % (aliased quantisation); the distance
+    # from the count interval removes that bias, and every coordinate lands within 5 %
+    trials = S.record_set(config=PlantConfig(seed=3, switching="tick",
+                                             effects=effects_from_mapping(ENCODER)))
+    prob = F.Problem(trials, TRUE)
+    assert prob.quantum == pytest.approx(2 * math.pi / 1024)
+    fr = F.coastdown_friction(trials, TRUE)
+    res = prob.fit(start={"tau_f": fr.tau_f})
+    true = F.force_coordinates(TRUE)
+    for name in ("peak", "centre", "width", "b"):
+        assert res.values[name] == pytest.approx(true[name], rel=0.05), name
+    assert res.values["tau_f"] == pytest.approx(TRUE.tau_f, rel=0.02)
+    plain = F.Problem(trials, TRUE, quantised=False).fit(start={"tau_f": fr.tau_f})
+    assert abs(res.values["peak"] / true["peak"] - 1) < 0.5 * abs(plain.values["peak"] /
+                                                                  true["peak"] - 1)
+
+
+def test_encoder_quantum_is_found_only_in_counts():
+    c = 2 * math.pi / 1024
+    counts = np.cumsum(np.r_[0, np.random.default_rng(0).integers(0, 4, 500)]) * c
+    assert F.encoder_quantum(counts + 7 * c) == pytest.approx(c)
+    assert F.encoder_quantum(counts + 1e-3 * np.random.default_rng(1).normal(size=501)) is None

@@ -176,7 +176,7 @@ class Problem:
 
     def __init__(self, trials: list[Trial], base: WheelParams | None = None,
                  candidates: tuple[Candidate, ...] = (), window: float = 1.0,
-                 fixed: dict[str, float] | None = None) -> None:
+                 fixed: dict[str, float] | None = None, quantised: bool = True) -> None:
         if not trials:
             raise ValueError("identification needs at least one trial")
         self.trials = [at_rest_trimmed(t) for t in trials]
@@ -188,6 +188,7 @@ class Problem:
         self.fixed = dict(fixed or {})
         self.free = [i for i, p in enumerate(self.specs) if p.name not in self.fixed]
         self.window = window
+        self.quantised = quantised
         self._concat()
 
     # -- layout -------------------------------------------------------------------------------
@@ -227,6 +228,7 @@ class Problem:
         self.phi_a = np.concatenate(pas)
         self.on_time = np.concatenate(ots)
         self.ok = np.concatenate(oks)
+        self.quantum = encoder_quantum(self.y) if self.quantised else None
         self.pad = (np.concatenate(es).astype(np.int64) % N_ACTUATORS)
         self.starts = np.asarray(starts + [n], dtype=np.int64)
         self.window_trial = np.asarray(owner)
@@ -295,7 +297,31 @@ class Problem:
 
     def residual(self, z: np.ndarray) -> np.ndarray:
         x1, _ = self.simulate(z)
-        return np.where(self.ok, x1 - self.y, 0.0)
+        return self.output_error(x1)
+
+    def output_error(self, x1: np.ndarray) -> np.ndarray:
+        """(n,) simulated minus measured angle [rad], 0 at rejected samples.
+
+        When the angles are encoder counts (``self.quantum`` [rad], found in the data), a
+        reading y says only that the angle lies in [y, y + quantum): the error is the
+        distance from that interval (0 inside).  Taking y itself as the angle would add the
+        encoder's sawtooth, which at 300 Hz aliases into slow errors that correlate with
+        speed and bias the force law (by ~5 % in its peak)."""
+        if self.quantum is None:
+            return np.where(self.ok, x1 - self.y, 0.0)
+        return np.where(self.ok, x1 - np.clip(x1, self.y, self.y + self.quantum), 0.0)
+
+    def noise(self, r: np.ndarray, g: int) -> tuple[float, float]:
+        """(s^2 [rad^2], inflation) of the residual r (n,) of a fit with g shared parameters.
+
+        With encoder intervals only the samples outside their interval carry error (the rest
+        are 0 and say only "inside"), so the variance is over those, and their
+        autocorrelation is taken about zero (the zeros are not noise about a mean)."""
+        active = self.ok & (r != 0.0) if self.quantum is not None else self.ok
+        dof = max(int(active.sum()) - g - 2 * self.n_windows, 1)
+        return (float(r @ r) / dof,
+                autocorrelation_inflation(r, self.starts, active,
+                                          centred=self.quantum is None))
 
     def initial_starts(self) -> np.ndarray:
         """(w, 2) window starts from a line through the first 0.1 s of each window."""
@@ -312,7 +338,7 @@ class Problem:
                x0: np.ndarray) -> np.ndarray:
         shoot(self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts, x0, pv,
               self._out1, self._out2)
-        return np.where(self.ok, self._out1 - self.y, 0.0)
+        return self.output_error(self._out1)
 
     def _window_sums(self, v: np.ndarray) -> np.ndarray:
         return np.add.reduceat(v, self.starts[:-1])
@@ -353,7 +379,7 @@ class Problem:
         scratch = np.zeros(self.n)
         every = np.arange(self.n_windows)
         shoot_windows(*args, every, x0, pv, out[0], out[1])
-        r = np.where(self.ok, out[0] - self.y, 0.0)
+        r = self.output_error(out[0])
         cost = self._window_sums(r * r)
         d1, d2 = np.zeros(self.n), np.zeros(self.n)
         active = np.ones(self.n_windows, dtype=bool)
@@ -364,7 +390,7 @@ class Problem:
             sel = np.repeat(np.isin(every, windows), lengths)
             for d, e, h in ((d1, (h1, 0.0), h1), (d2, (0.0, h2), h2)):
                 shoot_windows(*args, windows, x0 + e, pv, out[1], scratch)
-                d[sel] = (np.where(self.ok, out[1] - self.y, 0.0)[sel] - r[sel]) / h
+                d[sel] = (self.output_error(out[1])[sel] - r[sel]) / h
             stale[windows] = False
 
         for _ in range(iterations):
@@ -379,7 +405,7 @@ class Problem:
             trial = x0 + lam[:, None] * step
             np.maximum(trial[:, 1], 0.0, out=trial[:, 1])  # the wheel rolls forwards (or rests)
             shoot_windows(*args, windows, trial, pv, out[1], scratch)
-            r_try = np.where(self.ok, out[1] - self.y, 0.0)
+            r_try = self.output_error(out[1])
             cost_try = self._window_sums(r_try * r_try)
             take = active & (cost_try <= cost)
             x0[take] = trial[take]
@@ -483,9 +509,7 @@ class Problem:
         g = theta.size
         used = self.ok
         n_used = int(used.sum())
-        dof = max(n_used - g - 2 * self.n_windows, 1)
-        s2 = float(r @ r) / dof
-        inflation = autocorrelation_inflation(r, self.starts, used)
+        s2, inflation = self.noise(r, g)
         cov = covariance(J, np.array([self.specs[i].scale for i in self.free]),
                          s2 * inflation) if g else np.zeros((0, 0))
         full = self.full_theta(theta)
@@ -508,6 +532,21 @@ class Problem:
 
     def window_starts(self, z: np.ndarray) -> np.ndarray:
         return z[len(self.free):].reshape(-1, 2)
+
+
+def encoder_quantum(y: np.ndarray) -> float | None:
+    """The encoder's count [rad] if every step of the angles y (n,) is a whole number of one
+    count of 2 pi / N (N = 2^8 .. 2^16), else None (motion capture, filtered angles)."""
+    d = np.abs(np.diff(y))
+    d = d[d > 1e-9]
+    if d.size < 10:
+        return None
+    for bits in range(8, 17):
+        c = 2 * math.pi / 2 ** bits
+        k = d / c
+        if k.min() > 0.5 and np.max(np.abs(k - np.round(k))) < 1e-6:
+            return c
+    return None
 
 
 def covariance(J: np.ndarray, scale: np.ndarray, s2: float, tol: float = 1e-10) -> np.ndarray:
@@ -541,7 +580,7 @@ def at_rest_trimmed(tr: Trial, band: float = 0.015) -> Trial:
 
 
 def autocorrelation_inflation(r: np.ndarray, starts: np.ndarray, used: np.ndarray,
-                              max_lag: int = 30) -> float:
+                              max_lag: int = 30, centred: bool = True) -> float:
     """1 + 2 sum_{l=1..max_lag} rho_l: how much a correlated residual widens the intervals.
 
     Least-squares intervals assume independent residuals.  A 10-bit encoder sampled at 300 Hz
@@ -554,7 +593,8 @@ def autocorrelation_inflation(r: np.ndarray, starts: np.ndarray, used: np.ndarra
     for w in range(starts.shape[0] - 1):
         a, b = starts[w], starts[w + 1]
         rr = np.where(used[a:b], r[a:b], 0.0)
-        rr = rr - rr.mean()
+        if centred:
+            rr = rr - rr.mean()
         m = rr.shape[0]
         for lag in range(min(max_lag, m - 1) + 1):
             num[lag] += float(rr[lag:] @ rr[:m - lag])

@@ -10,6 +10,7 @@ shape.  Data that does not excite the bump's far side (phi_d at 22 deg only) wea
 """
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -52,7 +53,13 @@ class Identifiability:
 
 def identifiability(problem: Problem, params: WheelParams, x0: np.ndarray | None = None,
                     step: float = 1e-5) -> Identifiability:
-    """SVD of the projected sensitivity to the paper's parameters at ``params``."""
+    """SVD of the projected sensitivity to the paper's parameters at ``params``.
+
+    Structural: it asks what the model's output can show, so the output error is the plain
+    difference from the readings, not the distance from the encoder's count intervals (which
+    is flat inside them)."""
+    problem = copy.copy(problem)
+    problem.quantum = None
     x0 = problem.initial_starts() if x0 is None else x0
     pv = param_vector(params)
     gains = problem.gains(pv)

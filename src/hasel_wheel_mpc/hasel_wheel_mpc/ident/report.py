@@ -218,7 +218,9 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
         L += [f"Not carried into `model.yaml` (the plant and the MPC have no such field): "
               f"{', '.join(data['left_out_effects'])}.", ""]
     L += ["## Error before and after", "",
-          f"Window (multiple-shooting, 1 s windows) angle RMSE: nominal {1e3 * nb.fit.rmse:.3f} "
+          "Window error (multiple shooting, 1 s windows: RMS distance of the simulated angle "
+          "from each reading, or from its count interval when the angles are encoder counts): "
+          f"nominal {1e3 * nb.fit.rmse:.3f} "
           f"mrad fitted, {1e3 * nb.heldout_rmse:.3f} mrad held-out → identified "
           f"{1e3 * na.fit.rmse:.3f} / {1e3 * na.heldout_rmse:.3f} mrad.", "",
           f"Simulation error (free run with model switching, speed; the paper's Table III "

@@ -286,10 +286,12 @@ def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarra
 
 def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnostics:
     """Diagnostics of ``result`` (a fit of ``problem``)."""
-    r = problem.residual(result.z)
     x1, x2 = problem.simulate(result.z)
     x1, x2 = x1.copy(), x2.copy()
     ok = problem.ok
+    # the plain difference from the readings (not the distance from the encoder's count
+    # intervals that the fit minimises): its structure is what a user can plot and check
+    r = np.where(ok, x1 - problem.y, 0.0)
     a, valid = acceleration_residual(problem, r)
     band = 2.576 / math.sqrt(max(ok.sum(), 1))
     acf = _correlation(r[ok], r[ok], max_lag)[max_lag:]

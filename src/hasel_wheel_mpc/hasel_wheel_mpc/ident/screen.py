@@ -31,7 +31,7 @@ from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate
 from .data import Trial
-from .fit import FitResult, Problem, autocorrelation_inflation
+from .fit import FitResult, Problem
 
 
 @dataclass
@@ -42,6 +42,7 @@ class Screening:
     dof: int                       # the candidate's parameter count
     statistic: float               # delta / (s^2 x inflation)
     p_value: float                 # chi^2(dof) survival of the statistic
+    log10_p: float                 # its log10 (finite where p underflows to 0)
     predicted_rmse: float          # [rad] after the Gauss-Newton step
     start: dict[str, float]        # where a full fit should start (parameter name -> value)
 
@@ -57,10 +58,8 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     x_start = current_problem.window_starts(current.z)
     n_used = int(prob.ok.sum())
     sse0 = current.rmse ** 2 * n_used
-    dof = max(n_used - len(current.names) - 2 * prob.n_windows, 1)
-    s2 = sse0 / dof
-    inflation = autocorrelation_inflation(
-        current_problem.residual(current.z), current_problem.starts, current_problem.ok)
+    s2, inflation = current_problem.noise(current_problem.residual(current.z),
+                                          len(current.names))
     best: tuple[float, dict[str, float]] | None = None
     for values in (current.values, {**reference, **{k: v for k, v in current.values.items()
                                                    if k not in reference}}):
@@ -87,4 +86,5 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     statistic = delta / (s2 * inflation)
     return Screening(candidate.id, candidate.size, statistic,
                      float(stats.chi2.sf(statistic, candidate.size)),
+                     float(stats.chi2.logsf(statistic, candidate.size) / math.log(10.0)),
                      math.sqrt(max(sse, 0.0) / n_used), start)
