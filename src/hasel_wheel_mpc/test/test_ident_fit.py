@@ -83,3 +83,18 @@ def test_encoder_quantum_is_found_only_in_counts():
     counts = np.cumsum(np.r_[0, np.random.default_rng(0).integers(0, 4, 500)]) * c
     assert F.encoder_quantum(counts + 7 * c) == pytest.approx(c)
     assert F.encoder_quantum(counts + 1e-3 * np.random.default_rng(1).normal(size=501)) is None
+
+
+def test_the_braking_gain_is_fitted_when_the_data_brakes():
+    # braking activations (phi_a, phi_d < 0) in the data add brake_gain to the fit; start it
+    # 30 % off and it must come back within 5 % (it scales the braking force alone)
+    brake = (4.0, math.radians(-22.0), math.radians(-20.0))
+    specs = (S.SyntheticTrial(math.radians(3.0), drive=15.0, coast=5.0, brake=brake),
+             S.SyntheticTrial(math.radians(6.0), drive=15.0, coast=5.0, brake=brake))
+    trials = S.record_set(specs, config=PlantConfig(seed=2, switching="tick",
+                                                    effects=effects_from_mapping(ENCODER)))
+    assert any(a.phi_a < 0 for tr in trials for a in tr.activations)
+    prob = F.Problem(trials, TRUE.with_values(brake_gain=TRUE.brake_gain * 1.3))
+    assert "brake_gain" in prob.names
+    res = prob.fit(start={"tau_f": TRUE.tau_f})
+    assert res.values["brake_gain"] == pytest.approx(TRUE.brake_gain, rel=0.05)

@@ -31,6 +31,7 @@ from .fit import FitResult, Problem
 SG_WINDOW = 61          # samples (0.2 s at 300 Hz) of the Savitzky-Golay derivative
 SIGNIFICANCE = 1e-6     # p-value below which structure counts (many axes and frequencies)
 MIN_AMPLITUDE = 0.005   # [rad/s^2] structure smaller than this is not reported
+MIN_WINDOW_GAIN = 0.2   # a sinusoid that the window means shrink below this is not scanned
 
 #: axis -> (unit, periodic period or None, only while an actuator is on)
 AXES = {
@@ -274,6 +275,8 @@ def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarra
         ph = 2 * math.pi * f * x
         c = np.add.reduceat(np.cos(ph), st[:-1])[wins] / lengths
         s = np.add.reduceat(np.sin(ph), st[:-1])[wins] / lengths
+        if np.sqrt(np.mean(c * c + s * s)) < MIN_WINDOW_GAIN:
+            continue        # averaged away within the windows: nothing reliable to say
         X = np.column_stack([D, c, s])
         coef, *_ = np.linalg.lstsq(X, a, rcond=None)
         rss = float(np.sum((a - X @ coef) ** 2))
@@ -331,7 +334,7 @@ def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnosti
                 if p[i] > SIGNIFICANCE or amp[i] < MIN_AMPLITUDE:
                     break
                 f = freqs[i]
-                if any(abs(f - g) < 3 * step for g in taken):
+                if any(abs(f - g) < 8 * step for g in taken):   # within 2 resolution widths
                     continue
                 taken.append(f)
                 period = 1.0 / f

@@ -21,7 +21,8 @@ from .data import Trial
 
 @dataclass(frozen=True)
 class SyntheticTrial:
-    """Open-loop drive at (phi_a, phi_d) [rad] for ``drive`` [s], then a coast of ``coast`` [s]."""
+    """Open-loop drive at (phi_a, phi_d) [rad] for ``drive`` [s], optionally braking, then a
+    coast of ``coast`` [s]."""
 
     phi_a: float
     phi_d: float = math.radians(22.0)
@@ -29,6 +30,8 @@ class SyntheticTrial:
     coast: float = 10.0
     initial_speed: float = 1.0
     priming: int = 6
+    #: optional braking after the drive: (duration [s], phi_a [rad], phi_d [rad]), both <= 0
+    brake: tuple[float, float, float] | None = None
 
 
 #: The paper's five fitting trials (Fig. 9): phi_a = 1, 3, 5, 7, 9 deg at phi_d = 22 deg.
@@ -42,12 +45,16 @@ def record(spec: SyntheticTrial, params: WheelParams | None = None,
     plant = Plant(params, config, xi1=0.0, xi2=spec.initial_speed)
     plant.open_loop(spec.phi_a, spec.phi_d, priming=spec.priming)
     n_drive = int(round(spec.drive / TICK))
-    n = n_drive + int(round(spec.coast / TICK))
+    n_brake = int(round(spec.brake[0] / TICK)) if spec.brake else 0
+    n = n_drive + n_brake + int(round(spec.coast / TICK))
     cols = np.zeros((n, 7))
     s = plant.wheel.s
     k = 0
     for i in range(n):
-        if i == n_drive:
+        if i == n_drive and n_brake:
+            plant.open_loop(spec.brake[1], spec.brake[2], priming=0,
+                            priming_phi_a=spec.brake[1])
+        if i == n_drive + n_brake:
             plant.wheel.cut_hv()
         sample = plant.step()
         if sample is None:           # a dropped sample is simply missing from the log
