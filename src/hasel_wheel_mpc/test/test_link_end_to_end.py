@@ -262,11 +262,14 @@ def test_corruption_towards_the_device_is_dropped_there_and_the_link_survives(tm
     vt, core, seq = start(tmp_path, LinkFaults(host_corrupt=0.01, seed=11))
     try:
         run_sim_seconds(vt, core, seq, 20.0)
-        speed = vt.status()["speed"]
     finally:
         rep = vt.stop()
         time.sleep(0.1)
         core.shutdown()
+    # mean speed over the last 5 s of telemetry (one instant can sit in the dip of a cycle
+    # whose command was lost: 0.74 rad/s was seen once under load)
+    last = [s for s in seq.samples if s.t >= seq.samples[-1].t - 5.0]
+    speed = (last[-1].angle - last[0].angle) / (last[-1].t - last[0].t)
     assert rep.host_stream_dropped > 20                # damaged host frames were dropped ...
     sent_cmds = {c for _, c, _ in seq.sent}
     acted = {h.frame.message.command_seq for h in rep.received if h.frame.type == P.COMMAND}
@@ -278,7 +281,7 @@ def test_corruption_towards_the_device_is_dropped_there_and_the_link_survives(tm
     assert rep.faults_seen == [] and core.stats.watchdog_trips == 0 and core.stats.stale_events == 0
     # a lost command costs a cycle (the sequencer restarts an idle wheel), but the wheel is
     # still driven: coasting from 2 rad/s it would have stopped after ~6 s of these 20 s
-    assert speed > 1.0
+    assert 1.0 < speed < 10.0, speed
 
 
 def test_a_device_that_was_not_scheduled_does_not_blame_the_host(tmp_path):
