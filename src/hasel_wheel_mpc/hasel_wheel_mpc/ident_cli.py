@@ -36,8 +36,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     try:
+        lib = C.library(_ids(args.only), _ids(args.exclude))      # before reading any data
         trials = load_trials(args.inputs)
-        lib = C.library(_ids(args.only), _ids(args.exclude))
     except (TrialError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

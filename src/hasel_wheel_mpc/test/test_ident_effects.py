@@ -77,6 +77,33 @@ def test_an_undeclared_com_offset_is_named_measured_and_halves_the_error(com_ide
     assert not any(s.axis == "wheel_angle" for s in res.diagnostics_after.signatures)
 
 
+SPREAD = {"gain_spread": {"enabled": True, "std": {"value": 0.08, "unit": "1"}}}
+VISCOUS = {"viscous_drag": {"enabled": True,
+                            "coefficient": {"value": 0.0005, "unit": "N*m*s/rad"}}}
+
+
+def _realised_gain_std(seed: int) -> float:
+    """The std of the 16 gains the plant drew (record_set draws them once from the seed)."""
+    ext = effects_from_mapping(SPREAD).extensions(np.random.default_rng(seed))
+    g = np.array(ext.gains)
+    return float(np.std(g / np.exp(np.mean(np.log(g)))))      # geometric mean 1, as fitted
+
+
+@pytest.mark.parametrize("effect, cid", [(SPREAD, "gain_spread"), (VISCOUS, "viscous_drag")])
+def test_other_undeclared_effects_are_named_and_measured(effect, cid):
+    res = SEL.identify(_trials(effect), k_folds=3, max_effects=1, analyse_residuals=False)
+    assert res.chosen == (cid,)
+    assert res.final.sim_heldout_rmse <= 0.5 * res.nominal.sim_heldout_rmse
+    v = res.final.fit.values
+    if cid == "viscous_drag":
+        assert v["c"] == pytest.approx(0.0005, rel=0.1)
+        assert v["tau_f"] == pytest.approx(WheelParams().tau_f, rel=0.02)
+    else:
+        got = C.BY_ID[cid].describe([v[f"d{i}"] for i in range(1, 16)])
+        # 16 gains from ~100 s of data: their spread within 10 %
+        assert got["std"] == pytest.approx(_realised_gain_std(3), rel=0.1)
+
+
 def test_on_data_without_an_effect_nothing_is_added():
     res = SEL.identify(_trials({}, seed=5), k_folds=3)
     assert res.chosen == ()

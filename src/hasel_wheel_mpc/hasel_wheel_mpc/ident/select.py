@@ -6,10 +6,11 @@ Search (forward selection).  Starting from the nominal model:
 1. **screen** every candidate not yet in the model: add it and refit by one Gauss-Newton
    step, a score test (:mod:`.screen`).  A candidate goes on when it is significant
    (p < ``SCREEN_P``) and either is predicted to cut the window RMSE by at least half of
-   ``min_gain`` or *dominates*: it is at least twice as significant (in -log10 p) as every
-   other candidate.  A structure one effect causes is explained far better by that effect
-   than by the others; a structure from outside the library is caught a little by many and
-   dominated by none, and is then reported instead of forced onto a wrong explanation;
+   ``min_gain`` or belongs to a *dominant* group of at most ``max_refits``: each member at
+   least twice as significant (in -log10 p) as every candidate outside (:func:`dominant`).
+   A structure one effect causes is explained far better by that effect than by the others;
+   a structure from outside the library is caught a little by many and dominated by none,
+   and is then reported instead of forced onto a wrong explanation;
 2. **refit** those to convergence, most promising first, up to ``max_refits``, until one is
    accepted, and **cross-validate** each (k-fold by trial, each fold refitted; the held-out
    trials are scored with the fold's parameters).  Accepted only when all hold:
@@ -176,13 +177,21 @@ def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, .
     return ev
 
 
-def dominates(s: Screening, scores: list[Screening], factor: float = 2.0) -> bool:
-    """Whether ``s`` is at least ``factor`` times as significant as every other candidate
-    (in -log10 p).  A structure one effect causes is explained far better by that effect
-    than by the others, which only catch its projection on their own shapes; a structure
-    from outside the library is caught a little by many and dominated by none."""
-    others = [o.log10_p for o in scores if o is not s]
-    return not others or s.log10_p <= factor * min(others)
+def dominant(scores: list[Screening], group: int = 2, factor: float = 2.0) -> set[str]:
+    """The candidates in the smallest group (up to ``group``) whose every member is at least
+    ``factor`` times as significant (in -log10 p) as every candidate outside it.
+
+    A structure one effect causes is explained far better by that effect than by the others,
+    which only catch its projection on their own shapes.  Two effects of nearly the same
+    shape on the data at hand (a rise lag and charge retention both weaken the force over
+    time) can tie above the rest; both are then tried.  A structure from outside the library
+    is caught a little by many and dominated by none."""
+    ranked = sorted(scores, key=lambda s: s.log10_p)
+    for k in range(1, min(group, len(ranked)) + 1):
+        inside, outside = ranked[:k], ranked[k:]
+        if not outside or max(s.log10_p for s in inside) <= factor * outside[0].log10_p:
+            return {s.candidate for s in inside}
+    return set()
 
 
 def wald_p(fit: FitResult, effect: Candidate) -> float:
@@ -251,15 +260,22 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             scores = list(pool.map(score, todo))
         ident.screenings.append(scores)
         say("screened: " + ", ".join(f"{s.candidate} chi2 {s.statistic:.0f}" for s in scores))
+        lead = dominant(scores, max_refits)
         promising = sorted((s for s in scores if s.p_value < SCREEN_P and
                             (s.predicted_rmse <= (1.0 - 0.5 * min_gain) * current.fit.rmse
-                             or dominates(s, scores))),
+                             or s.candidate in lead)),
                            key=lambda s: s.predicted_rmse)[:max_refits]
         evs = []
         for sc in promising:
             c = BY_ID[sc.candidate]
             ev = evaluate(trials, base, chosen + (c,), window, sc.start, folds, threads,
                           cv_below=current.fit.rmse)
+            if ev.fit.rmse > current.fit.rmse:
+                # the nested model cannot fit worse: the linearised step sent the fit astray;
+                # start again from the current model with the candidate at its own start
+                say(f"  {c.id}: refit from the current model (the screened start fitted worse)")
+                ev = evaluate(trials, base, chosen + (c,), window, dict(current.fit.values),
+                              folds, threads, cv_below=current.fit.rmse)
             ev.wald_p = wald_p(ev.fit, c) if c.id != "charge_retention" else \
                 _retention_p(ev.fit)
             gain = 1.0 - ev.heldout_rmse / current.heldout_rmse
