@@ -44,14 +44,18 @@ def cmd_identify(args: argparse.Namespace) -> int:
     base = load_wheel_params(args.wheel_params) if args.wheel_params else WheelParams()
     print(f"{len(trials)} trials, {sum(t.duration for t in trials):.0f} s; candidates: "
           f"{', '.join(c.id for c in lib)}")
-    ident = identify(trials, base, library=lib, k_folds=args.folds,
-                     max_effects=args.max_effects, threads=args.threads,
-                     progress=None if args.quiet else print)
+    try:
+        ident = identify(trials, base, library=lib, k_folds=args.folds,
+                         max_effects=args.max_effects, threads=args.threads,
+                         progress=None if args.quiet else print)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     ident_text = None
     if ident.problem_before is not None:
         prob = ident.problem_before
         ident_text = identifiability(prob, ident.nominal.fit.params,
-                                     prob.window_starts(ident.nominal.fit.z)).text()
+                                     prob.window_starts(ident.nominal.fit.z)).text(tol=1e-4)
     closed = None
     if args.compare_plant:
         from .model_compare import compare_controllers

@@ -31,7 +31,7 @@ def test_identify_names_the_row_and_column_of_a_bad_file(tmp_path, capsys):
     bad.write_text("t,angle,q,eta,n_a,phi_a,phi_d\n0.0,0.1,0,0,-1,,\n0.0033,0.2,7,0,-1,,\n")
     assert main(["identify", str(bad), "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err
-    assert "row 3" in err and "q" in err
+    assert "row 3, column q: 7 is outside 0..1" in err
 
 
 def test_an_unknown_candidate_is_refused_with_the_known_ones(tmp_path, capsys):
@@ -39,3 +39,10 @@ def test_an_unknown_candidate_is_refused_with_the_known_ones(tmp_path, capsys):
     bad.write_text("t,angle,q,eta,n_a,phi_a,phi_d\n")
     assert main(["identify", str(bad), "--only", "warp_drive", "--out", str(tmp_path)]) == 2
     assert "warp_drive" in capsys.readouterr().err
+
+
+def test_one_trial_is_refused_because_nothing_could_be_held_out(tmp_path, capsys):
+    tr = S.record(S.SyntheticTrial(math.radians(3.0), drive=5.0, coast=2.0))
+    write_csv(tr, tmp_path / "one.csv")
+    assert main(["identify", str(tmp_path / "one.csv"), "--out", str(tmp_path / "r")]) == 2
+    assert "at least 2 trials" in capsys.readouterr().err

@@ -80,8 +80,10 @@ class Trial:
         dt = np.diff(self.t)
         if not np.all(dt > 0):
             k = int(np.argmax(dt <= 0)) + 1
-            raise TrialError(f"{where}: row {k + 1}, column t: time {self.t[k]!r} s is not "
-                             f"after the previous {self.t[k - 1]!r} s (t must increase)")
+            # sample k is CSV row k + 2 (row 1 is the header)
+            raise TrialError(f"{where}: row {k + 2}, column t: time {float(self.t[k])!r} s is "
+                             f"not after the previous {float(self.t[k - 1])!r} s (t must "
+                             f"increase)")
         self.angle = np.unwrap(self.angle.astype(float))
         self.eta_unwrapped = unwrap_eta(self.angle, self.eta, self.phi_a, self.phi_d, self.q)
         self.activations = find_activations(self)

@@ -36,6 +36,7 @@ from .simulate import free_run
 
 SPEED_WINDOW = 0.1      # [s] Savitzky-Golay window of the speed from the angle
 STEADY = 10.0           # [s] at the end of the drive, for the steady-state error
+EXTRA_ACTIVATIONS = 64  # continuation of the schedule for a simulation that runs ahead
 
 #: The paper's Table III (linear speed [m/s]): phi_a [deg] -> (RMSE, R^2, e_ss)
 PAPER_TABLE3 = {1: (0.17, 0.97, 0.12), 3: (0.32, 0.82, 0.18), 5: (0.16, 0.93, 0.09),
@@ -72,14 +73,24 @@ def simulate_trial(problem: Problem, theta: np.ndarray, trial: Trial,
     at its free parameters ``theta`` (g,).  Returns (xi1 (n,) [rad], q (n,) 0/1)."""
     pv, extra = problem.model(problem.full_theta(theta))
     acts = trial.activations
-    eta = np.array([a.eta for a in acts], dtype=float)
-    pa = np.array([a.phi_a for a in acts])
-    pd = np.array([a.phi_d for a in acts])
+    eta = [float(a.eta) for a in acts]
+    pa = [a.phi_a for a in acts]
+    pd = [a.phi_d for a in acts]
+    if acts:
+        # a simulation that runs faster than the wheel reaches the end of the recorded
+        # activations early: it goes on the way the schedule did (next pads, last angles)
+        # until the recording's last switch-on time, instead of coasting early
+        last = acts[-1]
+        eta += [last.eta + k for k in range(1, EXTRA_ACTIVATIONS + 1)]
+        pa += [last.phi_a] * EXTRA_ACTIVATIONS
+        pd += [last.phi_d] * EXTRA_ACTIVATIONS
+    t_last_on = float(trial.t[acts[-1].start]) if acts else -math.inf
     on0 = 1 if acts and acts[0].start == 0 else 0
     n = trial.t.shape[0]
     x1, x2, q = np.zeros(n), np.zeros(n), np.zeros(n)
-    free_run(trial.t, eta, pa, pd, 0, on0, np.asarray(x0, dtype=float),
-             float(extra.get("eta_offset", 0.0)), pv, x1, x2, q)
+    free_run(trial.t, np.array(eta), np.array(pa), np.array(pd), 0, on0,
+             np.asarray(x0, dtype=float), float(extra.get("eta_offset", 0.0)), t_last_on, pv,
+             x1, x2, q)
     return x1, q
 
 

@@ -229,6 +229,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         if progress is not None:
             progress(f"[{time.perf_counter() - t_start:6.1f} s] {text}")
 
+    if len(trials) < 2 or k_folds < 2:
+        raise ValueError(f"held-out validation by trial needs at least 2 trials and k_folds >= 2;"
+                         f" got {len(trials)} trial(s) and k_folds = {k_folds}")
     base = base or WheelParams()
     friction = coastdown_friction(trials, base)
     start = {"tau_f": friction.tau_f} if friction else {}

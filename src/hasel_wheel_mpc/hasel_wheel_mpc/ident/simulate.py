@@ -113,15 +113,17 @@ def retention_charge(t: np.ndarray, q: np.ndarray, pad: np.ndarray, recovery: fl
 
 @jit
 def free_run(t: np.ndarray, act_eta: np.ndarray, act_phi_a: np.ndarray, act_phi_d: np.ndarray,
-             j0: int, on0: int, x0: np.ndarray, eta_offset: float, pv: np.ndarray,
-             out1: np.ndarray, out2: np.ndarray, out_q: np.ndarray) -> None:
+             j0: int, on0: int, x0: np.ndarray, eta_offset: float, t_last_on: float,
+             pv: np.ndarray, out1: np.ndarray, out2: np.ndarray, out_q: np.ndarray) -> None:
     """Free run with model switching over the whole trial.
 
     act_* (m,): the recorded activations in order (unwrapped pad, phi_a, phi_d [rad]); j0 the
     activation pending at t[0]; on0 1 if it is on at t[0].  The pending activation switches on
     at the first sample where the simulated contact angle xi1 - eta pi/8 reaches phi_a, and off
     where it reaches phi_d; then the next one is pending.  Gains and retained charge follow the
-    simulated switching (pv's gains, retention rate and recovery).  x0 = (xi1, xi2) at t[0].
+    simulated switching (pv's gains, retention rate and recovery).  Nothing switches on after
+    ``t_last_on`` [s] (when the recording's last activation switched on), so a simulation
+    that runs slower does not drive on past the recorded drive.  x0 = (xi1, xi2) at t[0].
     Writes xi1, xi2, q into out1, out2, out_q (n,).
     """
     charge = np.zeros(N_ACTUATORS)
@@ -136,7 +138,7 @@ def free_run(t: np.ndarray, act_eta: np.ndarray, act_phi_a: np.ndarray, act_phi_
     for k in range(t.shape[0]):
         if j < m:
             xc = x1 - (act_eta[j] + eta_offset) * SECTOR
-            if on == 0 and xc >= act_phi_a[j]:
+            if on == 0 and xc >= act_phi_a[j] and t[k] <= t_last_on:
                 on = 1
                 t_on = t[k]
             if on == 1 and xc >= act_phi_d[j]:
