@@ -95,6 +95,8 @@ class Observer:
         self.updates = 0
         self._recent: deque[bool] = deque(maxlen=self.config.window)
         self._prev: TelemetrySample | None = None
+        #: (nu [rad], its predicted variance [rad^2]) of the last update, None before the first
+        self.innovation: tuple[float, float] | None = None
 
     def command_sent(self, sequence: int, phi_a: float, phi_d: float) -> None:
         """Tell the observer which (phi_a, phi_d) a command sequence number stands for."""
@@ -126,6 +128,7 @@ class Observer:
         h_p = self.P[0]
         s_inn = self.P[0, 0] + r
         nu = meas - self.x[0]
+        self.innovation = (float(nu), float(s_inn))     # one-step prediction error [rad, rad^2]
         outlier = nu * nu > (c.gate_sigma ** 2) * s_inn
         self._recent.append(outlier)
         if outlier:

@@ -145,3 +145,16 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     assert params.tau_f == pytest.approx(com_identification.final.fit.values["tau_f"])
     md = (tmp_path / "report.md").read_text()
     assert "com_offset" in md and "Table III" in md
+
+
+def test_the_one_step_prediction_residual_is_white_only_with_the_missing_effect(
+        com_identification):
+    # the observer's innovations under the nominal model stay correlated over many samples
+    # (a once-per-turn torque it is told nothing about); with the identified COM offset they
+    # are close to white and close to the size the observer predicts
+    before = list(com_identification.prediction_before.values())
+    after = list(com_identification.prediction_after.values())
+    assert all(b.whiteness_outside > 0.5 for b in before)
+    assert all(a.whiteness_outside < 0.2 for a in after)
+    assert all(a.normalised_rms < b.normalised_rms for a, b in zip(after, before))
+    assert all(0.8 < a.normalised_rms < 1.3 for a in after)

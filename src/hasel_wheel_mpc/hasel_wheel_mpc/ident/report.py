@@ -22,7 +22,9 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
 metrics                    {before: M, after: M}, M = {window_rmse_rad, heldout_window_rmse_rad,
                             simulation: {pooled_fitted_rmse_rad_s, pooled_heldout_rmse_rad_s,
                             per_trial: {name: {fitted: T, heldout: T}}}},
-                            T = {rmse, r2, nrmse, steady_state_error, samples} (rad/s, 1)
+                            T = {rmse, r2, nrmse, steady_state_error, samples} (rad/s, 1);
+                            prediction: {name: {rms_rad, normalised_rms,
+                            whiteness_outside}} (one-step prediction residual, first 20 s)
 diagnostics                {before: D, after: D}, D = {whiteness_outside, band99,
                             input_correlation_max, rms_accel_rad_s2, structures:
                             {axis: {p_value, amplitude_rad_s2}}}
@@ -50,6 +52,7 @@ from . import plots
 from .candidates import BY_ID
 from .data import find_coasts
 from .metrics import PAPER_TABLE3, TrialMetrics, pooled_rmse
+from .prediction import PREDICTION_SPAN
 from .residual import Diagnostics
 from .select import Evaluation, Identification
 
@@ -102,6 +105,11 @@ def _diagnostics(d: Diagnostics | None) -> dict | None:
                            for k, s in d.structures.items()}}
 
 
+def _prediction(pr: dict) -> dict:
+    return {name: {"rms_rad": _num(p.rms), "normalised_rms": _num(p.normalised_rms),
+                   "whiteness_outside": _num(p.whiteness_outside)} for name, p in pr.items()}
+
+
 def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> dict:
     """The report as a JSON-ready dict (keys in the module docstring)."""
     nominal_names = ident.nominal.fit.names
@@ -150,7 +158,10 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
             {"axis": s.axis, "unit": s.unit, "period": _num(s.period),
              "amplitude_rad_s2": _num(s.amplitude), "torque_N_m": _num(s.torque),
              "p_value": _num(s.p_value), "text": s.text} for s in after.signatures],
-        "metrics": {"before": _metrics(ident.nominal), "after": _metrics(ident.final)},
+        "metrics": {"before": dict(_metrics(ident.nominal),
+                                   prediction=_prediction(ident.prediction_before)),
+                    "after": dict(_metrics(ident.final),
+                                  prediction=_prediction(ident.prediction_after))},
         "diagnostics": {"before": _diagnostics(ident.diagnostics_before),
                         "after": _diagnostics(after)},
         "paper_table3": {str(k): {"rmse_m_s": v[0], "r2": v[1], "ess_m_s": v[2]}
@@ -277,6 +288,13 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
               f"the 99 % band (whiteness); max |cross-correlation with q| "
               f"{d.input_correlation_max:.3f} (band {d.band99:.3f}); acceleration residual "
               f"RMS {d.rms_accel:.3f} rad/s²"]
+        pr = ident.prediction_before if label == "nominal" else ident.prediction_after
+        if pr:
+            L += ["  * one-step prediction residual (observer innovations, first "
+                  f"{PREDICTION_SPAN:.0f} s of each trial): normalised RMS "
+                  + ", ".join(f"{p.normalised_rms:.2f}" for p in pr.values())
+                  + " (1 = as predicted); lags outside the 99 % band "
+                  + ", ".join(f"{100 * p.whiteness_outside:.0f} %" for p in pr.values())]
         for s in d.signatures:
             L += [f"  * {s.text}"]
     L += ["", "![correlation](correlation.png)", "", "![structure](structure.png)", "",

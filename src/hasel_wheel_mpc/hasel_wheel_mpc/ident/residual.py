@@ -152,7 +152,8 @@ def _cumulative_on(t: np.ndarray, q: np.ndarray, pad: np.ndarray) -> np.ndarray:
     return out
 
 
-def _correlation(x: np.ndarray, y: np.ndarray, max_lag: int) -> np.ndarray:
+def correlation(x: np.ndarray, y: np.ndarray, max_lag: int) -> np.ndarray:
+    """Normalised cross-correlation of x and y (n,) at lags -max_lag..max_lag (FFT)."""
     x = x - x.mean()
     y = y - y.mean()
     n = x.shape[0]
@@ -297,8 +298,8 @@ def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnosti
     r = np.where(ok, x1 - problem.y, 0.0)
     a, valid = acceleration_residual(problem, r)
     band = 2.576 / math.sqrt(max(ok.sum(), 1))
-    acf = _correlation(r[ok], r[ok], max_lag)[max_lag:]
-    ccf = _correlation(r[ok], problem.q[ok], max_lag)
+    acf = correlation(r[ok], r[ok], max_lag)[max_lag:]
+    ccf = correlation(r[ok], problem.q[ok], max_lag)
     lags = np.arange(-max_lag, max_lag + 1)
     diag = Diagnostics(
         rms_angle=float(np.sqrt(np.mean(r[ok] ** 2))),

@@ -45,6 +45,7 @@ from .candidates import BY_ID, LIBRARY, Candidate
 from .data import Trial
 from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates
 from .metrics import TrialMetrics, pooled_rmse, trial_metrics
+from .prediction import PredictionResidual, prediction_residual
 from .residual import Diagnostics, analyse
 from .screen import Screening, screen
 
@@ -87,6 +88,8 @@ class Identification:
     problem_before: Problem | None = None
     problem_after: Problem | None = None
     folds: list[list[int]] = field(default_factory=list)
+    prediction_before: dict[str, PredictionResidual] = field(default_factory=dict)
+    prediction_after: dict[str, PredictionResidual] = field(default_factory=dict)
     trials: list[Trial] = field(default_factory=list)
     base: WheelParams = field(default_factory=WheelParams)
     window: float = 1.0
@@ -308,6 +311,10 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         ident.diagnostics_before = analyse(ident.problem_before, nominal.fit)
         ident.problem_after = Problem(trials, base, chosen, window)
         ident.diagnostics_after = analyse(ident.problem_after, current.fit)
+        params, ext, _ = ident.model()
+        for tr in trials:
+            ident.prediction_before[tr.name] = prediction_residual(tr, nominal.fit.params)
+            ident.prediction_after[tr.name] = prediction_residual(tr, params, ext)
     return ident
 
 
