@@ -139,6 +139,9 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
         assert (tmp_path / name).stat().st_size > 5000
     per_trial = on_disk["metrics"]["after"]["simulation"]["per_trial"]
     assert set(per_trial) == {t.name for t in com_identification.trials}
+    # the physical values come with intervals that hold the truth
+    lo, hi = on_disk["effects"][0]["physical_ci95"]["torque_N_m"]
+    assert lo < 0.004 < hi and hi - lo < 0.001
     params, ext = load_model(tmp_path / on_disk["model_file"])
     assert ext.com_torque == pytest.approx(0.004, rel=0.05)
     assert ext.com_phase == pytest.approx(0.5, abs=0.05)

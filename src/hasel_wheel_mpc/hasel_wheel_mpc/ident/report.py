@@ -11,7 +11,8 @@ nominal                    {parameters: {name: {value, unit, ci95: [lo, hi]}},
                             wheel: {sigma1..sigma6, tau_f, brake_gain}}
 chosen_effects             [stable identifier, ...] in the order chosen; [] when none
 effects                    [{id, title, parameters: {name: {value, unit, ci95}},
-                            physical: {...}, wald_p}] for the chosen ones
+                            physical: {...}, physical_ci95: {name: [lo, hi]}, wald_p}]
+                            for the chosen ones
 candidates                 [{round, id, score_statistic, score_dof, score_p,
                             predicted_window_rmse_rad, refitted, window_rmse_rad,
                             heldout_window_rmse_rad (null: not cross-validated, the fit
@@ -78,6 +79,28 @@ def _params(ev: Evaluation, names: list[str] | None = None) -> dict:
     return out
 
 
+def _physical_ci(ev: Evaluation, c, x: np.ndarray) -> dict:
+    """95 % intervals of the effect's physical values (the scalar ones) by the delta method:
+    the fitted parameters' covariance through a finite-difference gradient of ``describe``."""
+    idx = [ev.fit.names.index(p.name) for p in c.params]
+    C = ev.fit.cov[np.ix_(idx, idx)]
+    base = c.describe(x)
+    out = {}
+    for key, v in base.items():
+        if not isinstance(v, float):
+            continue
+        g = np.zeros(x.size)
+        for j in range(x.size):
+            h = 1e-6 * max(abs(x[j]), c.params[j].scale)
+            xp = x.copy()
+            xp[j] += h
+            g[j] = (c.describe(xp)[key] - v) / h
+        var = float(g @ C @ g) if np.all(np.isfinite(C)) else math.inf
+        sd = math.sqrt(max(var, 0.0))
+        out[key] = [_num(v - 1.96 * sd), _num(v + 1.96 * sd)]
+    return out
+
+
 def _metrics(ev: Evaluation) -> dict:
     def t(m: TrialMetrics | None):
         return None if m is None else {k: (int(v) if k == "samples" else _num(v))
@@ -123,7 +146,9 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                   ident.final)
         chosen.append({"id": cid, "title": c.title,
                        "parameters": _params(ident.final, [p.name for p in c.params]),
-                       "physical": c.describe(x), "wald_p": _num(ev.wald_p)})
+                       "physical": c.describe(x),
+                       "physical_ci95": _physical_ci(ident.final, c, x),
+                       "wald_p": _num(ev.wald_p)})
     candidates = []
     for k, scs in enumerate(ident.screenings):
         evs = {e.effects[-1]: e for e in (ident.rounds[k] if k < len(ident.rounds) else [])}
@@ -218,7 +243,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
         for e in data["effects"]:
             ps = ", ".join(f"{k} = {v['value']:.4g} {v['unit']} (95 % CI {_ci(v['ci95'])})"
                            for k, v in e["parameters"].items())
-            phys = ", ".join(f"{k} = {v:.4g}" if isinstance(v, float) else f"{k} = {v}"
+            phys = ", ".join(f"{k} = {v:.4g} (95 % CI {_ci(e['physical_ci95'][k])})"
+                             if isinstance(v, float) else f"{k} = {v}"
                              for k, v in e["physical"].items() if k != "gains")
             L += [f"* `{e['id']}` ({e['title']}): {ps}; {phys}; Wald p = {e['wald_p']:.1e}"]
         L += [""]
