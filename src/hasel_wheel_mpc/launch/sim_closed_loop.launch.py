@@ -12,7 +12,8 @@ without commands, and a stopped wheel cannot be started; loading (or on the firs
 compiling) the model takes the nodes longer than that on a small machine.
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, RegisterEventHandler
+from launch.actions import (DeclareLaunchArgument, IncludeLaunchDescription,
+                            RegisterEventHandler, Shutdown)
 from launch.event_handlers import OnProcessIO
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
@@ -49,9 +50,11 @@ def generate_launch_description():
                                                      value_type=str)}
     observer = Node(package="hasel_wheel_mpc", executable="observer_node", name="observer_node",
                     namespace=namespace, output="screen",
+                    on_exit=Shutdown(reason="the observer exited"),
                     parameters=[LaunchConfiguration("observer_params_file"), controller_model])
     mpc = Node(package="hasel_wheel_mpc", executable="mpc_node", name="mpc_node",
                namespace=namespace, output="screen",
+               on_exit=Shutdown(reason="the MPC exited"),
                parameters=[LaunchConfiguration("mpc_params_file"), controller_model])
     sim = IncludeLaunchDescription(
         PythonLaunchDescriptionSource(PathJoinSubstitution([sim_share, "launch", "sim.launch.py"])),

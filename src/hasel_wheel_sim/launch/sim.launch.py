@@ -1,6 +1,6 @@
 """Launch the simulated wheel alone: ros2 launch hasel_wheel_sim sim.launch.py [namespace:=wheel0]."""
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
@@ -26,6 +26,7 @@ def generate_launch_description():
                                           "sensor/link effects only ('' = not used)"),
         Node(package="hasel_wheel_sim", executable="sim_node", name="sim",
              namespace=LaunchConfiguration("namespace"), output="screen",
+             on_exit=Shutdown(reason="the simulated wheel exited"),
              parameters=[LaunchConfiguration("params_file"),
                          {"plant_file": LaunchConfiguration("plant_file"),
                           "time_scale": LaunchConfiguration("time_scale"),
