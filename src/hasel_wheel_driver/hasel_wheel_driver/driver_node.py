@@ -17,8 +17,9 @@ from sensor_msgs.msg import JointState
 
 from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.link import DriverCore, LinkConfig
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
-                                                  float_param, qos_profile, text_param)
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param,
+                                                 publish_status, qos_profile, run_node,
+                                                 text_param)
 
 
 class DriverNode(Node):
@@ -87,9 +88,8 @@ class DriverNode(Node):
         d["commands_refused"] = str(self.commands_refused)
         ok = self.core.connected and not self.core.stale
         level = DiagnosticStatus.OK[0] if ok else DiagnosticStatus.ERROR[0]
-        self.pub_diag.publish(diagnostic_array(
-            self.get_clock().now().to_msg(), f"{self.get_fully_qualified_name()}: serial link",
-            self.core.config.port, level, "link up" if ok else "link down or stale: HV off", d))
+        publish_status(self, self.pub_diag, "serial link", self.core.config.port, level,
+                       "link up" if ok else "link down or stale: HV off", d)
 
     def destroy_node(self) -> None:
         confirmed = self.core.shutdown()          # ESTOP, then HV(0) as the last frame

@@ -27,12 +27,13 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
 from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
-                                                  float_param, int_param, qos_profile, text_param)
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param, int_param,
+                                                 publish_status, qos_profile, run_node,
+                                                 text_param)
 from hasel_wheel_sim.model import SECTOR
-from hasel_wheel_sim.model_file import controller_model, describe_model
 
 from .mpc import Mpc, MpcConfig
+from .node_model import declare_controller_model
 
 D = math.radians
 #: Parameters that are MpcConfig fields of the same name (changeable at run time).
@@ -51,14 +52,7 @@ class MpcNode(Node):
     def __init__(self) -> None:
         super().__init__("mpc_node")
         cfg = MpcConfig()
-        wheel_file = self.declare_parameter(
-            "wheel_params_file", "",
-            text_param("model parameter YAML (wheel: {name: {value, unit}}); '' = built-in "
-                       "paper values")).value
-        model_file = self.declare_parameter(
-            "model_file", "",
-            text_param("model file (wheel: + extensions:, hasel_wheel_sim.model_file), e.g. an "
-                       "identified model, in place of wheel_params_file; '' = not used")).value
+        params, ext, model_text = declare_controller_model(self)
         self.reference = self.declare_parameter(
             "reference_speed", 1.0,
             float_param("speed reference xi2_r [rad/s]; also set by std_msgs/Float64 on the "
@@ -94,7 +88,6 @@ class MpcNode(Node):
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
                                                    True)).value
         config = dataclasses.replace(cfg, **{k: self.get_parameter(k).value for k in CONFIG_PARAMS})
-        params, ext = controller_model(wheel_file, model_file)
         self.mpc = Mpc(params, ext, config=config)      # loads the compiled predictor
 
         # loop state, as in closed_loop.run_closed_loop
@@ -134,7 +127,7 @@ class MpcNode(Node):
         self.get_logger().info(
             f"ready: MPC, reference {self.reference:g} rad/s, {len(self.mpc.cands)} coarse "
             f"candidates, brake threshold {config.brake_threshold:g} rad/s; "
-            + describe_model(wheel_file, model_file, ext))
+            + model_text)
 
     # -- parameters ---------------------------------------------------------------------------
     def _on_set_parameters(self, params) -> SetParametersResult:
@@ -290,9 +283,8 @@ class MpcNode(Node):
             level, text = DiagnosticStatus.WARN[0], "deadline misses (fallback input sent)"
         else:
             level, text = DiagnosticStatus.OK[0], "deciding"
-        self.pub_diag.publish(diagnostic_array(
-            self.get_clock().now().to_msg(), f"{self.get_fully_qualified_name()}: mpc",
-            "hasel_wheel_mpc", level, text, values))
+        publish_status(self, self.pub_diag, "mpc", "hasel_wheel_mpc", level,
+                       text, values)
 
 
 def main(args=None):

@@ -24,12 +24,13 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
 from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
-                                                  float_param, qos_profile, text_param)
-from hasel_wheel_sim.model_file import controller_model, describe_model
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param,
+                                                 publish_status, qos_profile, run_node,
+                                                 text_param)
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .disturbance import IntegralEstimator
+from .node_model import declare_controller_model
 from .observer import Observer, ObserverConfig
 
 ESTIMATOR_MODES = ("tracking", "paper")
@@ -54,14 +55,7 @@ class ObserverNode(Node):
 
     def __init__(self) -> None:
         super().__init__("observer_node")
-        wheel_file = self.declare_parameter(
-            "wheel_params_file", "",
-            text_param("model parameter YAML (wheel: {name: {value, unit}}); '' = built-in "
-                       "paper values")).value
-        model_file = self.declare_parameter(
-            "model_file", "",
-            text_param("model file (wheel: + extensions:, hasel_wheel_sim.model_file), e.g. an "
-                       "identified model, in place of wheel_params_file; '' = not used")).value
+        params, ext, model_text = declare_controller_model(self)
         defaults = ObserverConfig()
         accel_noise = self.declare_parameter(
             "accel_noise", defaults.accel_noise,
@@ -96,7 +90,6 @@ class ObserverNode(Node):
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
                                                    True)).value
         self.frame_id = self.get_parameter("frame_id").value
-        params, ext = controller_model(wheel_file, model_file)
         self.obs = Observer(params, ext, config=ObserverConfig(
             accel_noise=accel_noise, encoder_noise=encoder_noise, gate_sigma=gate_sigma,
             disturbance_rate=disturbance_rate))
@@ -135,7 +128,7 @@ class ObserverNode(Node):
         self.get_logger().info(
             f"ready: observer on {topics.TELEMETRY.name} -> {topics.STATE_ESTIMATE.name}; "
             "estimator " + (f"{mode}, K = {gain:g}" if self.est else "off") + "; " +
-            describe_model(wheel_file, model_file, ext))
+            model_text)
 
     # -- parameters ---------------------------------------------------------------------------
     def _estimator_settings(self, params) -> tuple[float, str, float]:
@@ -235,9 +228,8 @@ class ObserverNode(Node):
             level, text = DiagnosticStatus.WARN[0], "degraded (quality or sample rate low)"
         else:
             level, text = DiagnosticStatus.OK[0], "estimating"
-        self.pub_diag.publish(diagnostic_array(
-            self.get_clock().now().to_msg(), f"{self.get_fully_qualified_name()}: observer",
-            "hasel_wheel_mpc", level, text, values))
+        publish_status(self, self.pub_diag, "observer", "hasel_wheel_mpc", level,
+                       text, values)
 
 
 def main(args=None):

@@ -83,9 +83,10 @@ def test_rclpy_only_in_node_and_launch_modules():
 
 
 def declared_parameters(pkg):
-    """{name: default or None} of every declare_parameter("name", default, ...) in pkg's nodes."""
+    """{name: default or None} of every declare_parameter("name", default, ...) in pkg's node
+    modules (``*_node.py``, and ``node_*.py`` helpers that declare parameters for them)."""
     out = {}
-    for f in (SRC / pkg).rglob("*_node.py"):
+    for f in [*(SRC / pkg).rglob("*_node.py"), *(SRC / pkg).rglob("node_*.py")]:
         for node in ast.walk(ast.parse(f.read_text())):
             if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
                     and node.func.attr == "declare_parameter" and node.args

@@ -23,8 +23,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, run_node, diagnostic_array, fill,
-                                                  float_param, qos_profile, text_param)
+from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param,
+                                                 publish_status, qos_profile, run_node,
+                                                 text_param)
 from hasel_wheel_sim.plant import load_plant_model
 from hasel_wheel_sim.sim_runtime import SimRuntime
 
@@ -102,9 +103,8 @@ class SimNode(Node):
         d = self.core.diagnostics()
         level = DiagnosticStatus.WARN[0] if self.core.commands_rejected or self.core.overruns \
             else DiagnosticStatus.OK[0]
-        self.pub_diag.publish(diagnostic_array(
-            self.get_clock().now().to_msg(), f"{self.get_fully_qualified_name()}: simulator",
-            "hasel_wheel_sim", level, "simulating", d))
+        publish_status(self, self.pub_diag, "simulator", "hasel_wheel_sim", level,
+                       "simulating", d)
 
 
 def main(args=None):

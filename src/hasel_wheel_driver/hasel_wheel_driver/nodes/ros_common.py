@@ -62,6 +62,14 @@ def diagnostic_array(stamp: Any, name: str, hardware_id: str, level: int, messag
     return arr
 
 
+def publish_status(node: Any, publisher: Any, kind: str, hardware_id: str, level: int,
+                   message: str, values: Mapping[str, str]) -> None:
+    """Publish one status named '<node's fully qualified name>: <kind>', stamped now."""
+    publisher.publish(diagnostic_array(
+        node.get_clock().now().to_msg(), f"{node.get_fully_qualified_name()}: {kind}",
+        hardware_id, level, message, values))
+
+
 def float_param(description: str, low: float, high: float, read_only: bool = False) -> ParameterDescriptor:
     """Descriptor of a double parameter with an inclusive range."""
     return ParameterDescriptor(description=description, read_only=read_only,
