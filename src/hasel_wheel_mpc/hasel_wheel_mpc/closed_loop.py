@@ -20,7 +20,7 @@ from hasel_wheel_sim.wheel import TICK
 
 from .disturbance import IntegralEstimator
 from .mpc import Mpc, MpcConfig
-from .observer import Observer, finite_difference_speed
+from .observer import Observer
 
 D = math.radians
 

@@ -38,10 +38,6 @@ SPEED_WINDOW = 0.1      # [s] Savitzky-Golay window of the speed from the angle
 STEADY = 10.0           # [s] at the end of the drive, for the steady-state error
 EXTRA_ACTIVATIONS = 64  # continuation of the schedule for a simulation that runs ahead
 
-#: The paper's Table III (linear speed [m/s]): phi_a [deg] -> (RMSE, R^2, e_ss)
-PAPER_TABLE3 = {1: (0.17, 0.97, 0.12), 3: (0.32, 0.82, 0.18), 5: (0.16, 0.93, 0.09),
-                7: (0.24, 0.73, 0.27), 9: (0.13, 0.72, 0.10)}
-
 
 @dataclass
 class TrialMetrics:

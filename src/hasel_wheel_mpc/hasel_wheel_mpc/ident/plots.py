@@ -16,7 +16,7 @@ import numpy as np  # noqa: E402
 
 from .metrics import simulate_trial, speed_from_angle  # noqa: E402
 from .residual import Diagnostics  # noqa: E402
-from .select import Evaluation, Identification  # noqa: E402
+from .select import Identification  # noqa: E402
 
 DPI = 110
 

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +53,8 @@ from hasel_wheel_sim.model_file import save_model
 from . import plots
 from .candidates import BY_ID
 from .data import find_coasts
-from .metrics import PAPER_TABLE3, TrialMetrics, pooled_rmse
+from ..paper import TABLE_III
+from .metrics import TrialMetrics, pooled_rmse
 from .prediction import PREDICTION_SPAN
 from .residual import Diagnostics
 from .select import Evaluation, Identification
@@ -190,7 +192,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
         "diagnostics": {"before": _diagnostics(ident.diagnostics_before),
                         "after": _diagnostics(after)},
         "paper_table3": {str(k): {"rmse_m_s": v[0], "r2": v[1], "ess_m_s": v[2]}
-                         for k, v in PAPER_TABLE3.items()},
+                         for k, v in TABLE_III.items()},
         "model_file": "model.yaml",
         "left_out_effects": left_out,
         "figures": figures,
@@ -214,7 +216,7 @@ def _table3_rows(ev_before: Evaluation, ev_after: Evaluation, r: float) -> list[
         hb = ev_before.sim_heldout.get(name, mb)
         ha = ev_after.sim_heldout.get(name, ma)
         deg = _phi_a_deg(name)
-        paper = PAPER_TABLE3.get(deg) if deg is not None else None
+        paper = TABLE_III.get(deg) if deg is not None else None
         pr = f"{paper[0]:.2f} | {paper[1]:.2f}" if paper else "– | –"
         rows.append(f"| {name} | {deg if deg is not None else '–'} | {pr} | "
                     f"{r * mb.rmse:.3f} / {r * hb.rmse:.3f} | {hb.r2:.3f} | "
@@ -225,7 +227,6 @@ def _table3_rows(ev_before: Evaluation, ev_after: Evaluation, r: float) -> list[
 
 def _phi_a_deg(name: str) -> int | None:
     """The activation angle in a trial name like 'phi_a_3deg' (the synthetic trials')."""
-    import re
     m = re.search(r"phi_a_(\d+)deg", name)
     return int(m.group(1)) if m else None
 
