@@ -1,0 +1,101 @@
+"""Benchmark of the identification against each effect the plant simulator can produce:
+the figures the README quotes in "Identification", beyond ``bench_ident.py``.
+
+For each effect, switched on alone in the plant and never declared to the tool, through the
+10-bit encoder with 1 mrad noise:
+
+* on the paper's five trials (5 x 60 s): what the whole-library search chose, its estimate
+  against the truth, the held-out simulation error before and after, and the wall time of
+  the search (without the residual analysis, which ``bench_ident.py`` times too);
+* for the rise lag and charge retention also on three short trials (3 x 34 s), where they are
+  harder to see.
+
+Then the closed loop on a COM plant: tracking RMSE with the nominal and with the true model in
+the controller, with the default observer and with its disturbance state off.
+
+Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 10 minutes; also part of
+``./dev bench``).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+from hasel_wheel_mpc.ident import candidates as C
+from hasel_wheel_mpc.ident import select as SEL
+from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.model_compare import compare_controllers
+from hasel_wheel_mpc.observer import ObserverConfig
+from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.model import Extensions
+from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.plant import PlantConfig
+
+ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.001, "unit": "rad"}}}
+SHORT = tuple(S.SyntheticTrial(math.radians(a), drive=25.0, coast=9.0) for a in (1.0, 4.0, 7.0))
+
+#: effect -> (plant section, candidate id, what to print: fitted name -> true value)
+CASES = {
+    "viscous drag 5e-4 N*m*s/rad": (
+        {"viscous_drag": {"enabled": True, "coefficient": {"value": 5e-4,
+                                                            "unit": "N*m*s/rad"}}},
+        "viscous_drag", {"c": 5e-4}),
+    "rise lag 20 ms": (
+        {"rise_lag": {"enabled": True, "time_constant": {"value": 0.02, "unit": "s"}}},
+        "rise_lag", {"tau": 0.02}),
+    "charge retention 0.01/s, recovery 300 s": (
+        {"charge_retention": {"enabled": True, "rate": {"value": 0.01, "unit": "1/s"},
+                              "recovery": {"value": 300.0, "unit": "s"}}},
+        "charge_retention", {"rate": 0.01, "recovery": 300.0}),
+    "gain spread std 0.08": (
+        {"gain_spread": {"enabled": True, "std": {"value": 0.08, "unit": "1"}}},
+        "gain_spread", {}),
+    "platform disturbance 0.004 N*m at 1 rad": (
+        {"platform_disturbance": {"enabled": True, "torque": {"value": 0.004, "unit": "N*m"},
+                                  "phase": {"value": 1.0, "unit": "rad"}}},
+        "platform_periodic", {}),
+}
+
+
+def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str) -> None:
+    trials = S.record_set(specs, config=PlantConfig(seed=3, switching="tick",
+                                                    effects=effects_from_mapping({**ENCODER,
+                                                                                  **effect})))
+    t0 = time.perf_counter()
+    res = SEL.identify(trials, k_folds=min(5, len(trials)), analyse_residuals=False)
+    dt = time.perf_counter() - t0
+    v = res.final.fit.values
+    est = ", ".join(f"{k} {v[k]:.4g} (true {t:g})" for k, t in truth.items() if k in v)
+    if cid in res.chosen and cid in ("gain_spread", "platform_periodic"):
+        d = C.BY_ID[cid].describe([v[p.name] for p in C.BY_ID[cid].params])
+        est = ", ".join(f"{k} {x:.4g}" for k, x in d.items() if isinstance(x, float))
+    verdict = "right" if res.chosen == (cid,) else "expected " + cid
+    print(f"{label}, {tag}: chosen {res.chosen or 'none'} ({verdict}); "
+          f"{est}; held-out simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
+          f"{res.final.sim_heldout_rmse:.4f} rad/s; {dt:.0f} s")
+
+
+def main() -> None:
+    for label, (effect, cid, truth) in CASES.items():
+        run(label, effect, cid, truth, S.PAPER_SET, "5 x 60 s")
+        if cid in ("rise_lag", "charge_retention"):
+            run(label, effect, cid, truth, SHORT, "3 x 34 s")
+    com = {"com_offset": {"enabled": True, "torque": {"value": 0.004, "unit": "N*m"},
+                          "phase": {"value": 0.5, "unit": "rad"}}}
+    plant = PlantConfig(seed=1, switching="tick", effects=effects_from_mapping({**ENCODER,
+                                                                                **com}))
+    models = {"nominal": (WheelParams(), None),
+              "true": (WheelParams(), Extensions(com_torque=0.004, com_phase=0.5))}
+    profile, duration = ((0.0, 1.0), (20.0, 1.5)), 40.0
+    for label, kw in (("default observer", {}),
+                      ("observer without its disturbance state",
+                       {"observer_config": ObserverConfig(disturbance_rate=0.0)})):
+        m = compare_controllers(None, plant, models, profile, duration, **kw)
+        ratio = m["true"]["rmse"] / m["nominal"]["rmse"]
+        print(f"closed loop on a COM plant, {label}: tracking RMSE nominal "
+              f"{m['nominal']['rmse']:.4f}, true model {m['true']['rmse']:.4f} rad/s "
+              f"(ratio {ratio:.2f})")
+
+
+if __name__ == "__main__":
+    main()
