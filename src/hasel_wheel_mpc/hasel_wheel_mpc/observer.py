@@ -94,6 +94,7 @@ class Observer:
         self.rejected = 0
         self.updates = 0
         self._recent: deque[bool] = deque(maxlen=self.config.window)
+        self._recent_bad = 0          # how many of self._recent are True (kept, not summed)
         self._prev: TelemetrySample | None = None
         #: (nu [rad], its predicted variance [rad^2]) of the last update, None before the first
         self.innovation: tuple[float, float] | None = None
@@ -130,7 +131,11 @@ class Observer:
         nu = meas - self.x[0]
         self.innovation = (float(nu), float(s_inn))     # one-step prediction error [rad, rad^2]
         outlier = nu * nu > (c.gate_sigma ** 2) * s_inn
-        self._recent.append(outlier)
+        if self._recent.maxlen:
+            if len(self._recent) == self._recent.maxlen:
+                self._recent_bad -= self._recent[0]
+            self._recent.append(bool(outlier))
+            self._recent_bad += bool(outlier)
         if outlier:
             self.rejected += 1
         else:
@@ -187,7 +192,7 @@ class Observer:
         xi1 = float(self.x[0])
         act = 0.0 if z.q else base + phi_a - xi1
         deact = base + phi_d - xi1
-        bad = sum(self._recent) / max(len(self._recent), 1)
+        bad = self._recent_bad / max(len(self._recent), 1)
         quality = max(0.0, 1.0 - 5.0 * bad)
         return Estimate(z.t, xi1, float(self.x[1]), z.q, act, deact, z.eta_unwrapped, 0.0,
                         float(math.sqrt(max(self.P[1, 1], 0.0))), quality,
