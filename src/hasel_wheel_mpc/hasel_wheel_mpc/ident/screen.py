@@ -31,7 +31,8 @@ from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate
 from .data import Trial
-from .fit import FitResult, Problem
+from .fit import FitResult, ParameterError, Problem
+from .threads import with_one_blas_thread
 
 
 @dataclass
@@ -47,6 +48,7 @@ class Screening:
     start: dict[str, float]        # where a full fit should start (parameter name -> value)
 
 
+@with_one_blas_thread
 def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...],
            current: FitResult, current_problem: Problem, candidate: Candidate,
            window: float, reference: dict[str, float]) -> Screening:
@@ -60,7 +62,7 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     sse0 = current.rmse ** 2 * n_used
     s2, inflation = current_problem.noise(current_problem.residual(current.z),
                                           len(current.names))
-    best: tuple[float, dict[str, float]] | None = None
+    best: tuple[float, np.ndarray, np.ndarray, float] | None = None
     for values in (current.values, {**reference, **{k: v for k, v in current.values.items()
                                                    if k not in reference}}):
         theta = np.array([values.get(prob.specs[i].name, prob.specs[i].start)
@@ -74,14 +76,27 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
         if best is None or sse < best[0]:
             lo = np.array([prob.specs[i].lower for i in prob.free])
             hi = np.array([prob.specs[i].upper for i in prob.free])
-            stepped = np.clip(theta - scale * coef, lo, hi)
-            # the full fit starts from the better place for the force law (one linearised
-            # step can overshoot its strongly nonlinear bump) and from the step for the
-            # candidate's own parameters, clipped into their bounds
-            best = (sse, {nm: float(v) for nm, v in zip(prob.names, theta)})
-            best[1].update({p.name: float(stepped[prob.names.index(p.name)])
-                            for p in candidate.params if p.name in prob.names})
-    sse, start = best
+            best = (sse, theta, np.clip(theta - scale * coef, lo, hi), float(r @ r))
+    sse, theta, stepped, sse_here = best
+    # the full fit starts from the better place for the force law (one linearised step can
+    # overshoot its strongly nonlinear bump) and from the step for the candidate's own
+    # parameters, clipped into their bounds and shortened until the error it gives is no
+    # worse than without it (a rise time stepped to its bound can make the error 30x worse,
+    # and a fit started there wanders)
+    own = np.array([prob.names.index(p.name) for p in candidate.params if p.name in prob.names],
+                   dtype=int)
+    trial = theta.copy()
+    for halvings in range(0, 12, 2):
+        trial[own] = theta[own] + (stepped[own] - theta[own]) * 0.5 ** halvings
+        try:
+            _, r_try, _, _ = prob.solve_starts(prob.full_theta(trial), x_start)
+        except ParameterError:
+            continue
+        if float(r_try @ r_try) <= sse_here:
+            break
+    else:
+        trial[own] = theta[own]
+    start = {nm: float(v) for nm, v in zip(prob.names, trial)}
     delta = max(sse0 - sse, 0.0)
     statistic = delta / (s2 * inflation)
     return Screening(candidate.id, candidate.size, statistic,
