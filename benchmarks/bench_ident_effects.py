@@ -5,15 +5,18 @@ For each effect, switched on alone in the plant and never declared to the tool, 
 10-bit encoder with 1 mrad noise:
 
 * on the paper's five trials (5 x 60 s): what the whole-library search chose, its estimate
-  against the truth, the held-out simulation error before and after, and the wall time of
-  the search (without the residual analysis, which ``bench_ident.py`` times too);
+  against the truth, the held-out simulation error before and after, the error of the true
+  model (the plant's own parameters: the floor that no identified model can go below, since
+  a free run drifts from the recording once a switch falls on the other side of a tick), and
+  the wall time of the full run (nominal fit, search and residual analysis: the issue's
+  target is 120 s on 5 x 60 s);
 * for the rise lag and charge retention also on three short trials (3 x 34 s), where they are
   harder to see.
 
 Then the closed loop on a COM plant: tracking RMSE with the nominal and with the true model in
 the controller, with the default observer and with its disturbance state off.
 
-Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 10 minutes; also part of
+Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 8 minutes; also part of
 ``./dev bench``).
 """
 from __future__ import annotations
@@ -22,6 +25,8 @@ import math
 import time
 
 from hasel_wheel_mpc.ident import candidates as C
+from hasel_wheel_mpc.ident import fit as F
+from hasel_wheel_mpc.ident import metrics as M
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.model_compare import compare_controllers
@@ -55,6 +60,20 @@ CASES = {
                                   "phase": {"value": 1.0, "unit": "rad"}}},
         "platform_periodic", {}),
 }
+#: effect -> the candidate's parameters at the plant's values, for the true model's error
+#: (P sin + Q cos of the pivot angle = T sin(pivot angle + phase))
+TRUE_VALUES = {"viscous drag 5e-4 N*m*s/rad": {"c": 5e-4},
+               "rise lag 20 ms": {"tau": 0.02},
+               "charge retention 0.01/s, recovery 300 s": {"rate": 0.01, "recovery": 300.0},
+               "platform disturbance 0.004 N*m at 1 rad": {"P": 0.004 * math.cos(1.0),
+                                                           "Q": 0.004 * math.sin(1.0)}}
+
+
+def true_model_error(trials, cid: str, values: dict[str, float]) -> float:
+    """The plant's own model's simulation error [rad/s] (the floor)."""
+    base = WheelParams()
+    return M.model_error(trials, base, (C.BY_ID[cid],),
+                         dict(F.force_coordinates(base), tau_f=base.tau_f, **values))
 
 
 def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str) -> None:
@@ -62,7 +81,7 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str) -> Non
                                                     effects=effects_from_mapping({**ENCODER,
                                                                                   **effect})))
     t0 = time.perf_counter()
-    res = SEL.identify(trials, k_folds=min(5, len(trials)), analyse_residuals=False)
+    res = SEL.identify(trials, k_folds=min(5, len(trials)))
     dt = time.perf_counter() - t0
     v = res.final.fit.values
     est = ", ".join(f"{k} {v[k]:.4g} (true {t:g})" for k, t in truth.items() if k in v)
@@ -70,9 +89,11 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str) -> Non
         d = C.BY_ID[cid].describe([v[p.name] for p in C.BY_ID[cid].params])
         est = ", ".join(f"{k} {x:.4g}" for k, x in d.items() if isinstance(x, float))
     verdict = "right" if res.chosen == (cid,) else "expected " + cid
+    floor = (f" (true model {true_model_error(trials, cid, TRUE_VALUES[label]):.4f})"
+             if label in TRUE_VALUES else "")
     print(f"{label}, {tag}: chosen {res.chosen or 'none'} ({verdict}); "
           f"{est}; held-out simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
-          f"{res.final.sim_heldout_rmse:.4f} rad/s; {dt:.0f} s")
+          f"{res.final.sim_heldout_rmse:.4f} rad/s{floor}; {dt:.0f} s")
 
 
 def main() -> None:

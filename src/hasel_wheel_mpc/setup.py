@@ -17,7 +17,8 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     # lower bounds only, so that Ubuntu 24.04 / ROS 2 Jazzy system packages satisfy them
-    install_requires=["setuptools", "numpy>=1.24", "PyYAML>=5.4", "hasel_wheel_driver", "hasel_wheel_sim"],
+    install_requires=["setuptools", "numpy>=1.24", "scipy>=1.10", "PyYAML>=5.4",
+                      "threadpoolctl>=3.1", "hasel_wheel_driver", "hasel_wheel_sim"],
     zip_safe=False,
     maintainer="HASEL wheel developers",
     maintainer_email="dev@hasel-wheel.invalid",

@@ -19,7 +19,7 @@ parameters, which directions are determined and which are not.
 Objective.  Each trial is cut into windows of ``window`` seconds; each window starts from its
 own (xi1, xi2), fitted along with the parameters (multiple shooting).  The residual is the
 simulated minus the measured angle [rad] at every sample, with the measured switching
-(:func:`~.simulate.shoot`).  The window starts are solved for inside every evaluation
+(:func:`~.simulate.shoot_windows`).  The window starts are solved for inside every evaluation
 (variable projection: Gauss-Newton on all windows at once), so scipy's trust-region least
 squares sees only the shared parameters, with the window starts projected out of its
 Jacobian (Kaufman).  It runs to convergence (``ftol = xtol = 1e-10``), not to an iteration
@@ -39,11 +39,11 @@ from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .candidates import Candidate, ParamSpec
 from .data import Trial
-from .simulate import retention_charge, shoot, shoot_windows
+from .simulate import retention_charge, shoot_windows
+from .threads import window_pool, with_one_blas_thread
 
 #: Glitch rejection: a sample further than this from the line through its neighbours [rad].
 GLITCH = 0.05
-
 
 def force_coordinates(p: WheelParams) -> dict[str, float]:
     """The force law's identifiable coordinates (see the module docstring).
@@ -176,7 +176,8 @@ class Problem:
 
     def __init__(self, trials: list[Trial], base: WheelParams | None = None,
                  candidates: tuple[Candidate, ...] = (), window: float = 1.0,
-                 fixed: dict[str, float] | None = None, quantised: bool = True) -> None:
+                 fixed: dict[str, float] | None = None, quantised: bool = True,
+                 threads: int = 1) -> None:
         if not trials:
             raise ValueError("identification needs at least one trial")
         self.trials = [at_rest_trimmed(t) for t in trials]
@@ -189,6 +190,7 @@ class Problem:
         self.free = [i for i, p in enumerate(self.specs) if p.name not in self.fixed]
         self.window = window
         self.quantised = quantised
+        self.threads = max(int(threads), 1)
         self._concat()
 
     # -- layout -------------------------------------------------------------------------------
@@ -235,6 +237,7 @@ class Problem:
         self.n = n
         self._out1 = np.zeros(n)
         self._out2 = np.zeros(n)
+        self._every = np.arange(self.n_windows)
         self._charge_cache: dict[float, np.ndarray] = {}
 
     @property
@@ -291,8 +294,7 @@ class Problem:
         pv, extra = self.model(self.full_theta(z[:g]))
         x0 = z[g:].reshape(-1, 2)
         eta = self.eta + extra.get("eta_offset", 0.0)
-        shoot(self.t, self.q, eta, self.phi_a, self.on_time, self.gains(pv), self.starts, x0, pv,
-              self._out1, self._out2)
+        self._shoot_windows(eta, self.gains(pv), self._every, x0, pv, self._out1, self._out2)
         return self._out1, self._out2
 
     def residual(self, z: np.ndarray) -> np.ndarray:
@@ -336,9 +338,25 @@ class Problem:
 
     def _shoot(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray,
                x0: np.ndarray) -> np.ndarray:
-        shoot(self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts, x0, pv,
-              self._out1, self._out2)
+        self._shoot_windows(eta, gains, self._every, x0, pv, self._out1, self._out2)
         return self.output_error(self._out1)
+
+    def _shoot_windows(self, eta: np.ndarray, gains: np.ndarray, windows: np.ndarray,
+                       x0: np.ndarray, pv: np.ndarray, out1: np.ndarray,
+                       out2: np.ndarray) -> None:
+        """:func:`~.simulate.shoot_windows` of ``windows`` on this problem's data, split over
+        ``self.threads`` threads (windows are independent and write disjoint samples, and
+        the compiled simulator releases the GIL, so the result is the same bit for bit)."""
+        args = (self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts)
+        if self.threads == 1 or windows.size < 2 * self.threads:
+            shoot_windows(*args, windows, x0, pv, out1, out2)
+            return
+        first, *rest = np.array_split(windows, self.threads)
+        pending = [window_pool().submit(shoot_windows, *args, part, x0, pv, out1, out2)
+                   for part in rest]
+        shoot_windows(*args, first, x0, pv, out1, out2)
+        for f in pending:
+            f.result()
 
     def _window_sums(self, v: np.ndarray) -> np.ndarray:
         return np.add.reduceat(v, self.starts[:-1])
@@ -373,12 +391,11 @@ class Problem:
         """
         x0 = x0.copy()
         h1, h2 = 1e-6, 1e-6
-        args = (self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts)
         lengths = np.diff(self.starts)
         out = [np.zeros(self.n) for _ in range(2)]
         scratch = np.zeros(self.n)
         every = np.arange(self.n_windows)
-        shoot_windows(*args, every, x0, pv, out[0], out[1])
+        self._shoot_windows(eta, gains, every, x0, pv, out[0], out[1])
         r = self.output_error(out[0])
         cost = self._window_sums(r * r)
         d1, d2 = np.zeros(self.n), np.zeros(self.n)
@@ -389,7 +406,7 @@ class Problem:
         def derivatives(windows: np.ndarray) -> None:
             sel = np.repeat(np.isin(every, windows), lengths)
             for d, e, h in ((d1, (h1, 0.0), h1), (d2, (0.0, h2), h2)):
-                shoot_windows(*args, windows, x0 + e, pv, out[1], scratch)
+                self._shoot_windows(eta, gains, windows, x0 + e, pv, out[1], scratch)
                 d[sel] = (self.output_error(out[1])[sel] - r[sel]) / h
             stale[windows] = False
 
@@ -404,7 +421,7 @@ class Problem:
             step[~active] = 0.0
             trial = x0 + lam[:, None] * step
             np.maximum(trial[:, 1], 0.0, out=trial[:, 1])  # the wheel rolls forwards (or rests)
-            shoot_windows(*args, windows, trial, pv, out[1], scratch)
+            self._shoot_windows(eta, gains, windows, trial, pv, out[1], scratch)
             r_try = self.output_error(out[1])
             cost_try = self._window_sums(r_try * r_try)
             take = active & (cost_try <= cost)
@@ -452,6 +469,7 @@ class Problem:
         return self._project(J, d1, d2)
 
     # -- fitting ------------------------------------------------------------------------------
+    @with_one_blas_thread
     def fit(self, start: dict[str, float] | None = None, x0: np.ndarray | None = None,
             max_nfev: int = 100) -> FitResult:
         """Least squares to convergence (variable projection: the window starts are solved

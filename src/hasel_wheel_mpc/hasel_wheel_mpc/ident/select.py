@@ -48,6 +48,7 @@ from .metrics import TrialMetrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
 from .residual import Diagnostics, analyse
 from .screen import Screening, screen
+from .threads import with_one_blas_thread
 
 
 SCREEN_P = 1e-6     # score-test p-value below which a candidate is refitted in full
@@ -142,7 +143,9 @@ def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, .
     With ``cv_below`` [rad], the folds are skipped (held-out error nan) when the fit on all
     trials does not get its window RMSE below it: an effect that does not even fit the
     data it saw cannot pass the held-out test."""
-    problem = Problem(trials, base, effects, window)
+    # the fit on all trials runs alone, so its windows share the threads; the folds then
+    # run side by side, one thread each
+    problem = Problem(trials, base, effects, window, threads=threads)
     full = problem.fit(start=start)
     x_full = problem.window_starts(full.z)
     ev = Evaluation(tuple(c.id for c in effects), full, full.rmse, dict(full.per_trial_rmse))
@@ -218,6 +221,7 @@ def _null_value(effect: Candidate, name: str) -> float:
     return 0.0
 
 
+@with_one_blas_thread
 def identify(trials: list[Trial], base: WheelParams | None = None,
              library: tuple[Candidate, ...] = LIBRARY, window: float = 1.0, k_folds: int = 5,
              min_gain: float = 0.10, max_effects: int = 2, max_refits: int = 2,
@@ -308,13 +312,17 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     if analyse_residuals:
         say("residual analysis")
         ident.problem_before = Problem(trials, base, (), window)
-        ident.diagnostics_before = analyse(ident.problem_before, nominal.fit)
         ident.problem_after = Problem(trials, base, chosen, window)
-        ident.diagnostics_after = analyse(ident.problem_after, current.fit)
         params, ext, _ = ident.model()
-        for tr in trials:
-            ident.prediction_before[tr.name] = prediction_residual(tr, nominal.fit.params)
-            ident.prediction_after[tr.name] = prediction_residual(tr, params, ext)
+        # the two analyses spend their time in numpy and the compiled simulator (no GIL), the
+        # prediction residuals in the Python observer: side by side they share the cores
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            before = pool.submit(analyse, ident.problem_before, nominal.fit)
+            after = pool.submit(analyse, ident.problem_after, current.fit)
+            for tr in trials:
+                ident.prediction_before[tr.name] = prediction_residual(tr, nominal.fit.params)
+                ident.prediction_after[tr.name] = prediction_residual(tr, params, ext)
+            ident.diagnostics_before, ident.diagnostics_after = before.result(), after.result()
     return ident
 
 

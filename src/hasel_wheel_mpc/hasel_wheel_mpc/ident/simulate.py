@@ -2,7 +2,7 @@
 
 Two ways to switch the actuators:
 
-* **measured switching** (:func:`shoot`): the actuator state (q, eta, phi_a) recorded at sample
+* **measured switching** (:func:`shoot_windows`): the actuator state (q, eta, phi_a) recorded at sample
   k acts over [t_k, t_k+1).  The firmware switches on its 300 Hz ticks and reports the state it
   switched to, so this reproduces it; the least-squares objective is smooth in the parameters,
   which is what the fit needs.  The trial is cut into windows, each started from its own
@@ -74,15 +74,6 @@ def shoot_windows(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarr
                           on_time[k], pv)
             out1[k + 1] = x1
             out2[k + 1] = x2
-
-
-@jit
-def shoot(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
-          on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray, x0: np.ndarray,
-          pv: np.ndarray, out1: np.ndarray, out2: np.ndarray) -> None:
-    """:func:`shoot_windows` of every window: out1, out2 (n,) get xi1 [rad], xi2 [rad/s]."""
-    shoot_windows(t, q, eta, phi_a, on_time, gain, starts,
-                  np.arange(starts.shape[0] - 1), x0, pv, out1, out2)
 
 
 @jit_inline
