@@ -89,11 +89,16 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str) -> Non
         d = C.BY_ID[cid].describe([v[p.name] for p in C.BY_ID[cid].params])
         est = ", ".join(f"{k} {x:.4g}" for k, x in d.items() if isinstance(x, float))
     verdict = "right" if res.chosen == (cid,) else "expected " + cid
-    floor = (f" (true model {true_model_error(trials, cid, TRUE_VALUES[label]):.4f})"
-             if label in TRUE_VALUES else "")
+    before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
+    floor = ""
+    if label in TRUE_VALUES:
+        ref = true_model_error(trials, cid, TRUE_VALUES[label])
+        floor = f" (true model {ref:.4f}: x{before / ref:.2f} smaller than before)"
+    refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
+                       f"(Wald p {e.wald_p:.1e})" for r in res.rounds for e in r)
     print(f"{label}, {tag}: chosen {res.chosen or 'none'} ({verdict}); "
-          f"{est}; held-out simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
-          f"{res.final.sim_heldout_rmse:.4f} rad/s{floor}; {dt:.0f} s")
+          f"{est}; held-out simulation error {before:.4f} -> {after:.4f} rad/s "
+          f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
 
 
 def main() -> None:

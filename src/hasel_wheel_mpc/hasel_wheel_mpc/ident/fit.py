@@ -40,7 +40,7 @@ from hasel_wheel_sim.params import ParameterError, WheelParams
 from .candidates import Candidate, ParamSpec
 from .data import Trial
 from .simulate import retention_charge, shoot_windows
-from .threads import window_pool, with_one_blas_thread
+from .threads import run_split, with_one_blas_thread
 
 #: Glitch rejection: a sample further than this from the line through its neighbours [rad].
 GLITCH = 0.05
@@ -171,7 +171,9 @@ class Problem:
 
     ``candidates`` extend the nominal model; ``fixed`` pins shared parameters by name
     (e.g. tau_f from the coast-downs).  Arrays of all trials are concatenated; windows never
-    cross a trial boundary.
+    cross a trial boundary.  ``threads`` > 1 splits every simulation's windows over that many
+    threads (the same numbers bit for bit).  An instance is not thread-safe: its simulations
+    share output arrays, so give each thread its own.
     """
 
     def __init__(self, trials: list[Trial], base: WheelParams | None = None,
@@ -351,12 +353,8 @@ class Problem:
         if self.threads == 1 or windows.size < 2 * self.threads:
             shoot_windows(*args, windows, x0, pv, out1, out2)
             return
-        first, *rest = np.array_split(windows, self.threads)
-        pending = [window_pool().submit(shoot_windows, *args, part, x0, pv, out1, out2)
-                   for part in rest]
-        shoot_windows(*args, first, x0, pv, out1, out2)
-        for f in pending:
-            f.result()
+        run_split(lambda part: shoot_windows(*args, part, x0, pv, out1, out2),
+                  np.array_split(windows, self.threads))
 
     def _window_sums(self, v: np.ndarray) -> np.ndarray:
         return np.add.reduceat(v, self.starts[:-1])

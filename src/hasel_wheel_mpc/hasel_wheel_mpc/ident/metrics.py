@@ -27,21 +27,22 @@ smooth function of its start or its parameters: a contact angle that reaches its
 just before or just after a tick moves that switch by 3.3 ms, and from then on the two runs
 drift apart (a change of 1e-6 in the force law has moved a 34 s trial's end by 0.4 rad, and
 its RMSE by half).  A reading from an encoder says only that the angle lies within one count,
-so each metric is the expectation over ``ENSEMBLE`` free runs whose start angles span that
-count evenly: the mean squared error (rmse = its root, r2 and nrmse from it) and the mean
+so each metric is the expectation over ``ENSEMBLE`` free runs whose start angles span one
+count's width evenly, centred on the fitted start (any spread above ~1e-6 rad decorrelates
+the switching over a trial, so the width matters little): the mean squared error (rmse = its root, r2 and nrmse from it) and the mean
 steady-state error.  One run's error is one draw of a noisy quantity; the ensemble's mean
 is what a model change can be judged by (for start shifts of up to 0.3 mrad, or parameter
 changes of 1e-6, the mean over 64 runs moved by 2-7 % where single runs moved by 37-50 %).  Angles without a count (motion capture) give a single run.
 
-The error has a floor that no model can go below: even the true model, run from a start
-inside the count, drifts from the recording once a switch falls on the other side of a tick
-(on the 3 x 34 s test trials with viscous drag, the true model's error is 0.027 rad/s, about
-half of the nominal model's 0.057).
+The error has a floor: even the true model, run this way, drifts from the recording once a
+switch falls on the other side of a tick.  :func:`model_error` measures it for given values
+(on the 3 x 34 s test trials with viscous drag the true model's error is about half the
+nominal model's).  A fitted model can land a little below it on held-out data by chance,
+never far.
 """
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -53,7 +54,7 @@ from .candidates import Candidate
 from .data import Trial
 from .fit import Problem
 from .simulate import free_run
-from .threads import window_pool
+from .threads import run_split
 
 SPEED_WINDOW = 0.1      # [s] Savitzky-Golay window of the speed from the angle
 STEADY = 10.0           # [s] at the end of the drive, for the steady-state error
@@ -96,8 +97,10 @@ def simulate_trial(problem: Problem, theta: np.ndarray, trial: Trial,
 
 def simulate_ensemble(problem: Problem, theta: np.ndarray, trial: Trial,
                       starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Free runs of ``trial`` from each row of ``starts`` (k, 2) = (xi1 [rad], xi2 [rad/s]),
-    shared over the identification's threads.  Returns (xi1 (k, n) [rad], q (k, n) 0/1)."""
+    """Free runs of ``trial`` (n samples) with the model of ``problem`` at its free parameters
+    ``theta`` (g,), from each row of ``starts`` (k, 2) = (xi1 [rad], xi2 [rad/s]); the runs
+    are shared over at least two threads of :func:`~.threads.window_pool`.
+    Returns (xi1 (k, n) [rad], q (k, n) 0/1)."""
     pv, extra = problem.model(problem.full_theta(theta))
     acts = trial.activations
     eta = [float(a.eta) for a in acts]
@@ -122,11 +125,7 @@ def simulate_ensemble(problem: Problem, theta: np.ndarray, trial: Trial,
         for i in rows:
             free_run(trial.t, *args, starts[i].copy(), offset, t_last_on, pv, x1[i], x2[i], q[i])
 
-    parts = np.array_split(np.arange(k), min(k, os.cpu_count() or 1))
-    pending = [window_pool().submit(run, part) for part in parts[1:]]
-    run(parts[0])
-    for f in pending:
-        f.result()
+    run_split(run, np.array_split(np.arange(k), min(k, max(problem.threads, 2))))
     return x1, q
 
 
@@ -134,8 +133,10 @@ def trial_metrics(problem: Problem, theta: np.ndarray, trial: Trial,
                   x0: tuple[float, float], ensemble: int = ENSEMBLE) -> TrialMetrics:
     """The simulation error of ``trial`` (see :func:`simulate_trial` for the arguments),
     averaged over ``ensemble`` start angles spread evenly over one encoder count around
-    x0[0] (see the module docstring).  Angles without a count (motion capture, exact data)
-    give one run from x0."""
+    the fitted start x0[0] (see the module docstring).  Angles without a count (motion
+    capture, exact data) give one run from x0."""
+    if ensemble < 1:
+        raise ValueError(f"ensemble must be a whole number of runs >= 1, got {ensemble}")
     v_meas = trial.speed if trial.speed is not None else speed_from_angle(trial.t, trial.angle)
     count = problem.quantum
     if not count:
@@ -167,10 +168,12 @@ def pooled_rmse(metrics: dict[str, TrialMetrics]) -> float:
 
 def model_error(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
                 values: dict[str, float]) -> float:
-    """Pooled simulation error [rad/s] of one given model on ``trials``, each trial run from
-    its own fitted start: ``values`` names every parameter of the model (the force-law
-    coordinates of :func:`~.fit.force_coordinates`, ``tau_f`` and the effects' own).  With
-    a plant's true values this is the floor that no identified model can go below."""
+    """Pooled simulation error [rad/s] (:func:`trial_metrics`, over all samples) of one
+    given model on ``trials``, each trial run from its own fitted start.  The model is the
+    force law about ``base`` (WheelParams) plus the candidate ``effects``; ``values`` names
+    every parameter (the coordinates of :func:`~.fit.force_coordinates`, ``tau_f`` and the
+    effects' own).  With a plant's true values it is the reference an identified model is
+    judged against: on held-out data a fitted model scores near it, rarely far below."""
     per = {}
     for tr in trials:
         pt = Problem([tr], base, effects)

@@ -81,13 +81,13 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     # the full fit starts from the better place for the force law (one linearised step can
     # overshoot its strongly nonlinear bump) and from the step for the candidate's own
     # parameters, clipped into their bounds and shortened until the error it gives is no
-    # worse than without it (a rise time stepped to its bound can make the error 30x worse,
-    # and a fit started there wanders)
+    # worse than with them at their start values (a rise time stepped to its bound can make
+    # the error 30x worse, and a fit started there wanders)
     own = np.array([prob.names.index(p.name) for p in candidate.params if p.name in prob.names],
                    dtype=int)
     trial = theta.copy()
-    for halvings in range(0, 12, 2):
-        trial[own] = theta[own] + (stepped[own] - theta[own]) * 0.5 ** halvings
+    for shrink in range(6):                                  # step x 1, 1/4, ..., 1/1024
+        trial[own] = theta[own] + (stepped[own] - theta[own]) * 0.25 ** shrink
         try:
             _, r_try, _, _ = prob.solve_starts(prob.full_theta(trial), x_start)
         except ParameterError:

@@ -142,7 +142,8 @@ def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, .
 
     With ``cv_below`` [rad], the folds are skipped (held-out error nan) when the fit on all
     trials does not get its window RMSE below it: an effect that does not even fit the
-    data it saw cannot pass the held-out test."""
+    data it saw cannot pass the held-out test.  ``threads``: how many threads the fit on all
+    trials splits its windows over, and how many folds run side by side."""
     # the fit on all trials runs alone, so its windows share the threads; the folds then
     # run side by side, one thread each
     problem = Problem(trials, base, effects, window, threads=threads)

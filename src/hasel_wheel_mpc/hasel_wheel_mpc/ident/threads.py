@@ -16,7 +16,7 @@ import functools
 import os
 import threading
 from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
@@ -30,16 +30,42 @@ _LOCK = threading.Lock()
 _HOLDERS = {"depth": 0, "limiter": None}
 
 F = TypeVar("F", bound=Callable[..., Any])
+T = TypeVar("T")
+
+
+def _cores() -> int:
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:                       # not on Linux
+        return os.cpu_count() or 1
 
 
 def window_pool() -> ThreadPoolExecutor:
-    """The shared worker threads, one per core (give them leaf tasks only: a task that
-    waits on another task of the same pool could wait forever)."""
+    """The process-wide worker threads, one per usable core, never shut down (a forked child
+    starts a fresh pool).  Give them leaf tasks only: a task that waits on another task of
+    the same pool could wait forever."""
     with _LOCK:
         if not _POOL:
-            _POOL.append(ThreadPoolExecutor(max_workers=os.cpu_count() or 2,
-                                            thread_name_prefix="ident"))
+            _POOL.append(ThreadPoolExecutor(max_workers=_cores(), thread_name_prefix="ident"))
         return _POOL[0]
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_POOL.clear)
+
+
+def run_split(fn: Callable[[T], None], parts: list[T]) -> None:
+    """``fn(part)`` for every part: the first in the calling thread, the rest on
+    :func:`window_pool`.  Returns once all have finished (also when one raised, so that none
+    is still writing into shared arrays), and re-raises the first error."""
+    pending = [window_pool().submit(fn, part) for part in parts[1:]]
+    try:
+        if parts:
+            fn(parts[0])
+    finally:
+        wait(pending)
+    for f in pending:
+        f.result()
 
 
 @contextmanager
