@@ -10,12 +10,15 @@ storage plugin writes them.
 from __future__ import annotations
 
 import os
+import struct
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any, Callable, Iterator, Mapping
 
 import yaml
-from mcap.reader import make_reader
+from mcap.exceptions import McapError
+from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder behind mcap_ros2's Writer
@@ -24,8 +27,14 @@ from mcap_ros2.decoder import DecoderFactory
 from . import interfaces
 from .topics import QosSpec
 
+try:                                    # mcap's own zstd decoder (a dependency of mcap)
+    from zstandard import ZstdError
+except ImportError:                     # pragma: no cover
+    ZstdError = McapError
+
 ROS_DISTRO = "jazzy"
 METADATA_VERSION = 9
+MCAP0_MAGIC = b"\x89MCAP0\r\n"       # the first (and last) 8 bytes of an MCAP file
 
 
 class BagError(RuntimeError):
@@ -50,6 +59,26 @@ def stamp(t_ns: int) -> dict[str, int]:
     return {"sec": int(t_ns // 1_000_000_000), "nanosec": int(t_ns % 1_000_000_000)}
 
 
+class _HandOver:
+    """A file for the MCAP writer that hands every write to the OS at once.  The writer
+    writes whole records (a finished chunk with its indexes in one go), so a recorder
+    killed with SIGKILL leaves every chunk but the one it was still filling in memory."""
+
+    def __init__(self, fh: Any) -> None:
+        self._fh = fh
+
+    def write(self, data: bytes) -> int:
+        n = self._fh.write(data)
+        self._fh.flush()
+        return n
+
+    def tell(self) -> int:
+        return self._fh.tell()
+
+    def flush(self) -> None:
+        self._fh.flush()
+
+
 class BagWriter:
     """Write messages (given as dicts) to a new rosbag2-layout MCAP bag.
 
@@ -67,7 +96,8 @@ class BagWriter:
         self.path.mkdir(parents=True, exist_ok=True)
         self.file_name = f"{self.path.name}_0.mcap"
         self._fh = open(self.path / self.file_name, "wb")
-        self._mcap = McapWriter(self._fh, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._mcap = McapWriter(_HandOver(self._fh), chunk_size=chunk_size,
+                                compression=CompressionType.ZSTD)
         self._mcap.start(profile="ros2", library="hasel_wheel_driver.bagio (mcap-python)")
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, _Channel] = {}
@@ -168,11 +198,106 @@ def mcap_files(path: str | os.PathLike) -> list[Path]:
     return files
 
 
-def read_messages(path: str | os.PathLike,
-                  topics: list[str] | None = None) -> Iterator[tuple[str, int, Any]]:
-    """Yield (topic, log_time_ns, decoded message) from a bag, in log-time order per file."""
+def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
+                  warn: Callable[[str], None] | None = None
+                  ) -> Iterator[tuple[str, int, Any]]:
+    """Yield (topic, log_time_ns, decoded message) from a bag, in log-time order per file.
+
+    A file that was never finished (the recorder was killed: no summary, maybe a record cut
+    off at the end) is read record by record, in the order it was written, up to the last
+    complete chunk, and ``warn``
+    (e.g. ``print``; default :func:`warnings.warn`) is told what was lost.  A channel whose
+    messages cannot be decoded (a type without a ros2msg schema) is skipped with one
+    warning.  A file that is not MCAP at all raises :class:`BagError` naming it."""
+    say = warn or (lambda text: warnings.warn(text, stacklevel=3))
     for f in mcap_files(path):
+        if not f.is_file():
+            raise BagError(f"{f}: listed in the bag's metadata.yaml but missing")
+        if f.stat().st_size == 0:
+            raise BagError(f"{f}: empty file (the recorder stopped before writing anything)")
         with open(f, "rb") as fh:
-            reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-            for _schema, channel, message, decoded in reader.iter_decoded_messages(topics=topics):
-                yield channel.topic, message.log_time, decoded
+            if fh.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
+                raise BagError(f"{f}: not an MCAP file (it does not start with the MCAP magic "
+                               f"bytes); a rosbag2 bag here must use the mcap storage")
+            fh.seek(0)
+            finished = _has_summary(fh)
+            fh.seek(0)
+            if finished:
+                reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+                yield from _decoded(reader.iter_messages(topics=topics), f, say)
+            else:
+                yield from _recover(fh, f, topics, say)
+
+
+def _has_summary(fh: Any) -> bool:
+    """Whether the file ends with a footer and the closing magic (it was finished)."""
+    try:
+        return make_reader(fh).get_summary() is not None
+    except (McapError, ValueError, OSError, struct.error, StopIteration):
+        return False
+
+
+def _decoded(messages: Iterator[tuple[Any, Any, Any]], f: Path,
+             say: Callable[[str], None]) -> Iterator[tuple[str, int, Any]]:
+    """Decode (schema, channel, message) tuples; skip channels that have no decoder."""
+    factory = DecoderFactory()
+    decoders: dict[int, Any] = {}
+    for schema, channel, message in messages:
+        decode = decoders.get(channel.id, ...)
+        if decode is ...:
+            decode = None
+            try:
+                decode = factory.decoder_for(channel.message_encoding, schema)
+            except Exception as exc:             # a schema the ros2msg parser rejects
+                say(f"{f}: topic {channel.topic}: its schema cannot be read ({exc}); skipped")
+            else:
+                if decode is None:
+                    say(f"{f}: topic {channel.topic} ({channel.message_encoding}, schema "
+                        f"{schema.name if schema else 'none'}) has no ROS 2 decoder; skipped")
+            decoders[channel.id] = decode
+        if decode is not None:
+            yield channel.topic, message.log_time, decode(message.data)
+
+
+def _recover(fh: Any, f: Path, topics: list[str] | None,
+             say: Callable[[str], None]) -> Iterator[tuple[str, int, Any]]:
+    """Messages of an unfinished file, in file order, up to where it breaks off."""
+    reader = NonSeekingReader(fh, validate_crcs=True)
+    count, last = 0, None
+    try:
+        for topic, t_ns, msg in _decoded(reader.iter_messages(topics=topics,
+                                                              log_time_order=False), f, say):
+            count += 1
+            last = t_ns
+            yield topic, t_ns, msg
+    except (McapError, ValueError, struct.error, ZstdError) as exc:
+        size, at = f.stat().st_size, _whole_records_end(fh)
+        where = (f"ends after its last finished chunk at byte {size}" if at >= size else
+                 f"is cut inside a record that starts at byte {at} of {size} "
+                 f"({type(exc).__name__})")
+        say(f"{f}: the recording was not closed (killed?) and {where}; read {count} messages"
+            f"{_until(last)}; lost: what the recorder still held in memory (at most one "
+            f"chunk){'' if at >= size else ' and the record that was cut'}")
+    else:
+        say(f"{f}: the recording was not closed (killed?): no summary, but every chunk is "
+            f"whole; read {count} messages{_until(last)}; lost: what the recorder still held "
+            f"in memory (at most one chunk)")
+
+
+def _whole_records_end(fh: Any) -> int:
+    """Byte offset where the file's whole records end (MCAP records are an opcode byte and
+    a little-endian uint64 length, then that many bytes)."""
+    fh.seek(0, os.SEEK_END)
+    size = fh.tell()
+    pos = len(MCAP0_MAGIC)
+    while pos + 9 <= size:
+        fh.seek(pos + 1)
+        (length,) = struct.unpack("<Q", fh.read(8))
+        if pos + 9 + length > size:
+            break
+        pos += 9 + length
+    return pos
+
+
+def _until(t_ns: int | None) -> str:
+    return "" if t_ns is None else f", up to t = {t_ns / 1e9:.6f} s"
