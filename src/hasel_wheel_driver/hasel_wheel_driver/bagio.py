@@ -205,11 +205,35 @@ def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
 
     A file that was never finished (the recorder was killed: no summary, maybe a record cut
     off at the end) is read record by record, in the order it was written, up to the last
-    complete chunk, and ``warn``
-    (e.g. ``print``; default :func:`warnings.warn`) is told what was lost.  A channel whose
-    messages cannot be decoded (a type without a ros2msg schema) is skipped with one
-    warning.  A file that is not MCAP at all raises :class:`BagError` naming it."""
+    complete chunk, and ``warn`` (e.g. ``print``; default :func:`warnings.warn`) is told what
+    was lost.  A channel whose messages cannot be decoded (a type without a ros2msg schema)
+    is skipped with one warning.  A file that is not MCAP at all raises :class:`BagError`
+    naming it."""
     say = warn or (lambda text: warnings.warn(text, stacklevel=3))
+    for f, records in _files(path, topics, say):
+        yield from _decoded(records, f, say)
+
+
+def read_raw(path: str | os.PathLike, topics: list[str] | None = None,
+             warn: Callable[[str], None] | None = None) -> Iterator[tuple[str, str, int, bytes]]:
+    """Yield (topic, type, log_time_ns, CDR bytes) from a bag without decoding (for counts,
+    rates and copies); files are handled as in :func:`read_messages`."""
+    say = warn or (lambda text: warnings.warn(text, stacklevel=3))
+    for _f, records in _files(path, topics, say):
+        for schema, channel, message in records:
+            yield (channel.topic, schema.name if schema else "", message.log_time,
+                   message.data)
+
+
+def file_finished(f: str | os.PathLike) -> bool:
+    """Whether an MCAP file was closed properly (it ends with its summary and footer)."""
+    with open(f, "rb") as fh:
+        return _has_summary(fh)
+
+
+def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str], None]
+           ) -> Iterator[tuple[Path, Iterator[tuple[Any, Any, Any]]]]:
+    """(file, its (schema, channel, message) records) for every MCAP file of a bag."""
     for f in mcap_files(path):
         if not f.is_file():
             raise BagError(f"{f}: listed in the bag's metadata.yaml but missing")
@@ -223,10 +247,9 @@ def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
             finished = _has_summary(fh)
             fh.seek(0)
             if finished:
-                reader = make_reader(fh, decoder_factories=[DecoderFactory()])
-                yield from _decoded(reader.iter_messages(topics=topics), f, say)
+                yield f, make_reader(fh).iter_messages(topics=topics)
             else:
-                yield from _recover(fh, f, topics, say)
+                yield f, _recover(fh, f, topics, say)
 
 
 def _has_summary(fh: Any) -> bool:
@@ -260,16 +283,16 @@ def _decoded(messages: Iterator[tuple[Any, Any, Any]], f: Path,
 
 
 def _recover(fh: Any, f: Path, topics: list[str] | None,
-             say: Callable[[str], None]) -> Iterator[tuple[str, int, Any]]:
-    """Messages of an unfinished file, in file order, up to where it breaks off."""
+             say: Callable[[str], None]) -> Iterator[tuple[Any, Any, Any]]:
+    """(schema, channel, message) records of an unfinished file, in file order, up to where
+    it breaks off."""
     reader = NonSeekingReader(fh, validate_crcs=True)
     count, last = 0, None
     try:
-        for topic, t_ns, msg in _decoded(reader.iter_messages(topics=topics,
-                                                              log_time_order=False), f, say):
+        for record in reader.iter_messages(topics=topics, log_time_order=False):
             count += 1
-            last = t_ns
-            yield topic, t_ns, msg
+            last = record[2].log_time
+            yield record
     except (McapError, ValueError, struct.error, ZstdError) as exc:
         size, at = f.stat().st_size, _whole_records_end(fh)
         where = (f"ends after its last finished chunk at byte {size}" if at >= size else

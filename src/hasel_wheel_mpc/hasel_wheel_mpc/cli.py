@@ -28,7 +28,7 @@ from hasel_wheel_sim.plant import PlantConfig, load_plant_config
 from hasel_wheel_sim.trials_support import braking_fall_time, open_loop_speed
 from hasel_wheel_sim.wheel import TICK
 
-from . import ident_cli, paper
+from . import bag_cli, ident_cli, paper
 from .recorder import Recorder, git_revision
 from .trials import TrialResult, run_trial, steady_speed, trials_from_mapping
 
@@ -260,6 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant.yaml")))
     r.set_defaults(func=cmd_link_run)
     ident_cli.add_parsers(sub)
+    bag_cli.add_parsers(sub)
     return ap
 
 

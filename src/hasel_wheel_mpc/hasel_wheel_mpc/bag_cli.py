@@ -1,0 +1,47 @@
+"""``hasel_wheel bag``: offline tools on recorded bags (no ROS needed).
+
+    hasel_wheel bag info out/demo/demo_bag         # topics, counts, rates, gaps, configuration
+    hasel_wheel bag info killed_run/ --json        # the same as JSON
+
+Bags are rosbag2 directories (``metadata.yaml`` + ``*.mcap``) or single ``.mcap`` files,
+from the embedded runner or from ``ros2 bag record -s mcap``; a recording that was killed is
+read up to its last finished chunk, and the tool says what was lost.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import asdict
+
+from hasel_wheel_driver.bagio import BagError
+from hasel_wheel_driver.baginfo import bag_info
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    """Print what a bag holds."""
+    def progress(n: int) -> None:
+        print(f"\r  read {n:,} messages ...", end="", file=sys.stderr, flush=True)
+
+    try:
+        info = bag_info(args.bag, progress=None if args.json else progress)
+    except BagError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if not args.json and info.messages >= 100_000:
+        print(file=sys.stderr)
+    if args.json:
+        print(json.dumps(asdict(info), indent=1, allow_nan=True))
+    else:
+        print(info.text())
+    return 0
+
+
+def add_parsers(sub) -> None:
+    """Add ``bag`` (with ``info``) to the ``hasel_wheel`` sub-command parser."""
+    b = sub.add_parser("bag", help="offline tools on recorded bags (info)")
+    tools = b.add_subparsers(dest="bag_command", required=True)
+    i = tools.add_parser("info", help="topics, counts, rates, gaps, duration, configuration")
+    i.add_argument("bag", help="bag directory or .mcap file")
+    i.add_argument("--json", action="store_true", help="print JSON instead of text")
+    i.set_defaults(func=cmd_info)
