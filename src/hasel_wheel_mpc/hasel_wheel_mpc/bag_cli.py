@@ -2,6 +2,7 @@
 
     hasel_wheel bag info out/demo/demo_bag         # topics, counts, rates, gaps, configuration
     hasel_wheel bag info killed_run/ --json        # the same as JSON
+    hasel_wheel bag export out/demo/bag --out csv/ --topics /wheel0/telemetry   # CSV per topic
 
 Bags are rosbag2 directories (``metadata.yaml`` + ``*.mcap``) or single ``.mcap`` files,
 from the embedded runner or from ``ros2 bag record -s mcap``; a recording that was killed is
@@ -15,6 +16,7 @@ import sys
 from dataclasses import asdict
 
 from hasel_wheel_driver.bagio import BagError
+from hasel_wheel_driver.bagexport import export_csv
 from hasel_wheel_driver.baginfo import bag_info
 
 
@@ -37,11 +39,31 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(args: argparse.Namespace) -> int:
+    """Write chosen topics as CSV files, one per topic."""
+    topics = [t.strip() for t in args.topics.split(",") if t.strip()] if args.topics else None
+    try:
+        report = export_csv(args.bag, args.out, topics,
+                            warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+    except BagError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for topic, r in report.items():
+        extra = f" ({r['misfits']} rows with other array lengths)" if r["misfits"] else ""
+        print(f"{topic}: {r['rows']} rows -> {r['file']}{extra}")
+    return 0 if report else 1
+
+
 def add_parsers(sub) -> None:
-    """Add ``bag`` (with ``info``) to the ``hasel_wheel`` sub-command parser."""
-    b = sub.add_parser("bag", help="offline tools on recorded bags (info)")
+    """Add ``bag`` (with ``info`` and ``export``) to the ``hasel_wheel`` sub-command parser."""
+    b = sub.add_parser("bag", help="offline tools on recorded bags (info, export)")
     tools = b.add_subparsers(dest="bag_command", required=True)
     i = tools.add_parser("info", help="topics, counts, rates, gaps, duration, configuration")
     i.add_argument("bag", help="bag directory or .mcap file")
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
     i.set_defaults(func=cmd_info)
+    e = tools.add_parser("export", help="chosen topics as CSV, one file per topic")
+    e.add_argument("bag", help="bag directory or .mcap file")
+    e.add_argument("--out", required=True, help="directory for the CSV files")
+    e.add_argument("--topics", default=None, help="comma-separated topics (default: all)")
+    e.set_defaults(func=cmd_export)
