@@ -199,7 +199,8 @@ def mcap_files(path: str | os.PathLike) -> list[Path]:
 
 
 def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
-                  warn: Callable[[str], None] | None = None
+                  warn: Callable[[str], None] | None = None,
+                  select: Callable[[str], bool] | None = None
                   ) -> Iterator[tuple[str, int, Any]]:
     """Yield (topic, log_time_ns, decoded message) from a bag, in log-time order per file.
 
@@ -208,9 +209,12 @@ def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
     complete chunk, and ``warn`` (e.g. ``print``; default :func:`warnings.warn`) is told what
     was lost.  A channel whose messages cannot be decoded (a type without a ros2msg schema)
     is skipped with one warning.  A file that is not MCAP at all raises :class:`BagError`
-    naming it."""
+    naming it.  ``select(topic)``, when given, picks topics by name before anything is
+    decoded (e.g. by suffix, when the namespaces are not known in advance)."""
     say = warn or (lambda text: warnings.warn(text, stacklevel=3))
     for f, records in _files(path, topics, say):
+        if select is not None:
+            records = (r for r in records if select(r[1].topic))
         yield from _decoded(records, f, say)
 
 

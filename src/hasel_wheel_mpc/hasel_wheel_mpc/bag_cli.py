@@ -2,6 +2,7 @@
 
     hasel_wheel bag info out/demo/demo_bag         # topics, counts, rates, gaps, configuration
     hasel_wheel bag info killed_run/ --json        # the same as JSON
+    hasel_wheel bag metrics out/demo/bag           # per wheel and reference segment
     hasel_wheel bag export out/demo/bag --out csv/ --topics /wheel0/telemetry   # CSV per topic
 
 Bags are rosbag2 directories (``metadata.yaml`` + ``*.mcap``) or single ``.mcap`` files,
@@ -39,6 +40,27 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_metrics(args: argparse.Namespace) -> int:
+    """Print the closed-loop metrics of every wheel in a bag."""
+    from .bag_metrics import bag_metrics
+    try:
+        wheels = bag_metrics(args.bag, window=args.window,
+                             warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+    except BagError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps([asdict(w) for w in wheels], indent=1, allow_nan=True))
+    else:
+        for w in wheels:
+            print(w.text())
+    if not wheels:
+        print(f"error: {args.bag}: no wheel with a reference_speed topic and a speed "
+              f"(sim/true_state or state_estimate)", file=sys.stderr)
+        return 1
+    return 0
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     """Write chosen topics as CSV files, one per topic."""
     topics = [t.strip() for t in args.topics.split(",") if t.strip()] if args.topics else None
@@ -55,13 +77,20 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add ``bag`` (with ``info`` and ``export``) to the ``hasel_wheel`` sub-command parser."""
-    b = sub.add_parser("bag", help="offline tools on recorded bags (info, export)")
+    """Add ``bag`` (``info``, ``metrics``, ``export``) to the ``hasel_wheel`` sub-command parser."""
+    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, export)")
     tools = b.add_subparsers(dest="bag_command", required=True)
     i = tools.add_parser("info", help="topics, counts, rates, gaps, duration, configuration")
     i.add_argument("bag", help="bag directory or .mcap file")
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
     i.set_defaults(func=cmd_info)
+    m = tools.add_parser("metrics", help="per wheel and reference segment: steady error, NRMSE, "
+                                         "rise/fall and settling times, deadline misses")
+    m.add_argument("bag", help="bag directory or .mcap file")
+    m.add_argument("--window", type=float, default=10.0,
+                   help="[s] steady window at the end of each segment (default 10)")
+    m.add_argument("--json", action="store_true", help="print JSON instead of text")
+    m.set_defaults(func=cmd_metrics)
     e = tools.add_parser("export", help="chosen topics as CSV, one file per topic")
     e.add_argument("bag", help="bag directory or .mcap file")
     e.add_argument("--out", required=True, help="directory for the CSV files")

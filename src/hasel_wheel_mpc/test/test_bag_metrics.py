@@ -1,0 +1,88 @@
+"""bag metrics on a recording whose answers are known in closed form: constant offsets give
+the steady error and NRMSE, ramps of known slope give the rise and fall times."""
+import math
+
+import pytest
+
+from hasel_wheel_driver import samples, topics
+from hasel_wheel_driver.bagio import BagWriter
+from hasel_wheel_driver.samples import Command
+from hasel_wheel_mpc.bag_metrics import bag_metrics
+from hasel_wheel_mpc.cli import main
+
+RATE = 300.0
+SLOPE = 0.5            # [rad/s^2] of the ramps
+
+
+def _speed(t: float) -> float:
+    """ref 1.0 (+0.01) until 20 s; ramp up to 2.0 (+0.02) until 40 s; ramp down to 1.5
+    (-0.015) until 60 s: every hold is 1 % off its reference."""
+    if t < 20.0:
+        return 1.01
+    if t < 40.0:
+        return min(1.01 + SLOPE * (t - 20.0), 2.02)
+    return max(2.02 - SLOPE * (t - 40.0), 1.485)
+
+
+@pytest.fixture
+def bag(tmp_path):
+    path = tmp_path / "run"
+    st, ref, status = topics.TRUE_STATE, topics.REFERENCE, topics.MPC_STATUS
+    with BagWriter(path) as b:
+        for ns in ("/w1", "/w2"):
+            b.add_topic(ns + "/reference_speed", ref.type, ref.qos)
+            b.add_topic(ns + "/state_estimate", st.type, st.qos)
+        b.add_topic("/w1/sim/true_state", st.type, st.qos)
+        b.add_topic("/w1/mpc_status", status.type, status.qos)
+        events = []
+        for t0, r in ((0.0, 1.0), (20.0, 2.0), (30.0, 2.0), (40.0, 1.5)):   # 30 s: a repeat
+            for ns in ("/w1", "/w2"):
+                events.append((round(t0 * 1e9), ns + "/reference_speed", {"data": r}))
+        for k in range(int(60 * RATE)):
+            t = k / RATE
+            t_ns = round(t * 1e9)
+            events.append((t_ns, "/w1/sim/true_state",
+                           samples.state_msg(t, 0.0, _speed(t), 0, 0.0, 0.0, 0)))
+            events.append((t_ns, "/w1/state_estimate",             # worse: must be ignored
+                           samples.state_msg(t, 0.0, _speed(t) + 0.3, 0, 0.0, 0.0, 0)))
+            events.append((t_ns, "/w2/state_estimate",
+                           samples.state_msg(t, 0.0, _speed(t), 0, 0.0, 0.0, 0)))
+        for k in range(10):
+            slack = -0.001 if k in (3, 7) else 0.02 - 0.001 * k
+            events.append((round(k * 1e9), "/w1/mpc_status",
+                           samples.mpc_status_msg(k, Command(k + 1, 0.1, 0.3, k), 1.0, 1.0,
+                                                  0.0, 1e-3, slack, 36, k in (3, 7), False)))
+        for t_ns, topic, msg in sorted(events, key=lambda e: e[0]):
+            b.write(topic, msg, t_ns)
+    return path
+
+
+def test_segments_match_the_closed_forms(bag):
+    w1, w2 = bag_metrics(bag)
+    assert (w1.namespace, w2.namespace) == ("/w1", "/w2")
+    assert w1.speed_source == "/w1/sim/true_state" and w2.speed_source == "/w2/state_estimate"
+    assert w1.profile == [(0.0, 1.0), (20.0, 2.0), (40.0, 1.5)]      # the repeat is no step
+    for w in (w1, w2):
+        up, down = w.segments[1], w.segments[2]
+        for seg in w.segments:
+            assert seg.steady_error == pytest.approx(1.0, rel=1e-6)
+            assert seg.nrmse == pytest.approx(0.01, rel=1e-6)
+        assert math.isnan(w.segments[0].transition)
+        # first sample at or past the new reference on a ramp of slope 0.5 rad/s^2
+        assert up.transition == pytest.approx((2.0 - 1.01) / SLOPE, abs=1.01 / RATE)
+        assert down.transition == pytest.approx((2.02 - 1.5) / SLOPE, abs=1.01 / RATE)
+        assert up.settle == pytest.approx((2.0 * 0.98 - 1.01) / SLOPE, abs=1.01 / RATE)
+    assert (w1.decisions, w1.deadline_misses, w1.min_slack) == (10, 2, -0.001)
+    assert (w2.decisions, w2.deadline_misses) == (0, 0) and math.isnan(w2.min_slack)
+
+
+def test_the_command_line_prints_each_wheel(bag, tmp_path, capsys):
+    assert main(["bag", "metrics", str(bag)]) == 0
+    out = capsys.readouterr().out
+    assert "wheel /w1 (speed from /w1/sim/true_state): 10 MPC decisions, 2 deadline misses" in out
+    assert "wheel /w2" in out
+    empty = tmp_path / "empty"
+    with BagWriter(empty) as b:
+        b.add_topic("/x", topics.REFERENCE.type, topics.REFERENCE.qos)
+    assert main(["bag", "metrics", str(empty)]) == 1
+    assert "no wheel with a reference_speed topic" in capsys.readouterr().err
