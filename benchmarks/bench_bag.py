@@ -68,7 +68,7 @@ def write(path: Path, seconds: float) -> tuple[int, float]:
             b.write(NS + "/sim/true_state", samples.state_msg(t, v * t, v, k % 2, 0.0, 0.0, 0), t_ns)
             n += 4
             if k % 60 == 0:
-                c = Command(k // 20 + 2, 0.17, 0.38, k // 60)
+                c = Command((k // 20 + 2) % 200, 0.17, 0.38, k // 60)
                 b.write(NS + "/mpc_status", samples.mpc_status_msg(t, c, ref, v, 0.0, 1e-3, 0.02,
                                                                     36, False, False), t_ns)
                 b.write(NS + "/command", samples.command_msg(c, t), t_ns)

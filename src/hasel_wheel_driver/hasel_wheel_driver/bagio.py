@@ -229,6 +229,16 @@ def read_raw(path: str | os.PathLike, topics: list[str] | None = None,
                    message.data)
 
 
+def topic_names(path: str | os.PathLike) -> set[str] | None:
+    """The bag's topics from its metadata.yaml, without reading a message; None when there is
+    no metadata (a single .mcap file, or a recording that was killed)."""
+    meta = Path(path) / "metadata.yaml"
+    if not meta.is_file():
+        return None
+    info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+    return {t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []}
+
+
 def file_finished(f: str | os.PathLike) -> bool:
     """Whether an MCAP file was closed properly (it ends with its summary and footer)."""
     with open(f, "rb") as fh:

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-from hasel_wheel_driver.bagio import read_messages
+from hasel_wheel_driver.bagio import read_messages, topic_names
 
 from .closed_loop import LoopLog, SegmentMetrics, segment_metrics
 
@@ -77,8 +77,17 @@ def bag_metrics(path: str | os.PathLike, window: float = 10.0,
         return wheels.setdefault(topic[: -len(suffix)], _Wheel())
 
     suffixes = (SUFFIX_REFERENCE, SUFFIX_TRUE, SUFFIX_ESTIMATE, SUFFIX_STATUS)
-    for topic, t_ns, m in read_messages(path, warn=warn,
-                                        select=lambda name: name.endswith(suffixes)):
+    known = topic_names(path)
+
+    def wanted(name: str) -> bool:
+        if not name.endswith(suffixes):
+            return False
+        # the observer's speed is not decoded where the true speed was recorded (when the
+        # metadata says which topics there are)
+        return not (known is not None and name.endswith(SUFFIX_ESTIMATE)
+                    and name[: -len(SUFFIX_ESTIMATE)] + SUFFIX_TRUE in known)
+
+    for topic, t_ns, m in read_messages(path, warn=warn, select=wanted):
         t = t_ns / 1e9
         if topic.endswith(SUFFIX_REFERENCE):
             wheel(topic, SUFFIX_REFERENCE).ref.append((t, float(m.data)))
