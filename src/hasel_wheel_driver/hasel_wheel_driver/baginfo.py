@@ -99,7 +99,7 @@ class _Running:
             self.head.append(dt)
             if len(self.head) == PERIOD_SAMPLES:
                 self.period = float(np.median(self.head))
-        elif dt > GAP_FACTOR * self.period:
+        elif self.period > 0 and dt > GAP_FACTOR * self.period:
             self.gaps_after += 1
 
     def finish(self, start: int) -> TopicInfo:
@@ -107,7 +107,8 @@ class _Running:
         if self.head:
             period = self.period if self.period is not None else float(np.median(self.head))
             i.period_s = period / 1e9
-            i.gaps = sum(1 for d in self.head if d > GAP_FACTOR * period) + self.gaps_after
+            i.gaps = (sum(1 for d in self.head if d > GAP_FACTOR * period) if period > 0
+                      else 0) + self.gaps_after
             i.max_interval_s = self.max_interval / 1e9
         i.first_s = (self.first - start) / 1e9
         i.last_s = (self.last - start) / 1e9
@@ -126,8 +127,10 @@ def _configuration(path: Path) -> dict[str, str]:
 
 def bag_info(path: str | os.PathLike,
              progress: Callable[[int], None] | None = None) -> BagInfo:
-    """Read a bag (directory or .mcap file) once and summarise it.  ``progress(n)`` is called
-    every 100,000 messages."""
+    """Read a bag (directory or .mcap file) once and summarise it as a :class:`BagInfo`
+    (counts, rates [Hz], intervals [s], configuration, the reader's warnings).
+    ``progress(n)`` is called every 100,000 messages.  Gaps are not counted for a topic whose
+    median interval is 0 (repeated stamps)."""
     p = Path(path)
     said: list[str] = []
     running: dict[str, _Running] = {}

@@ -19,6 +19,7 @@ from typing import Any, Callable, Iterator, Mapping
 import yaml
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
+from mcap.stream_reader import CRCValidationError
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder behind mcap_ros2's Writer
@@ -60,9 +61,11 @@ def stamp(t_ns: int) -> dict[str, int]:
 
 
 class _HandOver:
-    """A file for the MCAP writer that hands every write to the OS at once.  The writer
-    writes whole records (a finished chunk with its indexes in one go), so a recorder
-    killed with SIGKILL leaves every chunk but the one it was still filling in memory."""
+    """A file for the MCAP writer that flushes every write to the OS at once (the file itself
+    is buffered).  The writer writes a finished chunk in one write and its message indexes
+    in the next, so a recorder killed with SIGKILL leaves every finished chunk (at worst
+    without the last chunk's indexes, which the reader does not need) and loses only the
+    chunk it was still filling in memory."""
 
     def __init__(self, fh: Any) -> None:
         self._fh = fh
@@ -89,6 +92,8 @@ class BagWriter:
 
     def __init__(self, path: str | os.PathLike, chunk_size: int = 1024 * 1024,
                  custom_data: Mapping[str, str] | None = None) -> None:
+        """``chunk_size``: bytes of uncompressed messages per chunk (the most a killed
+        recorder loses); ``custom_data``: strings for metadata.yaml's custom_data."""
         self.path = Path(path)
         if self.path.exists() and any(self.path.iterdir()):
             raise BagError(f"{self.path}: bag directory exists and is not empty; choose a new "
@@ -230,13 +235,14 @@ def read_raw(path: str | os.PathLike, topics: list[str] | None = None,
 
 
 def topic_names(path: str | os.PathLike) -> set[str] | None:
-    """The bag's topics from its metadata.yaml, without reading a message; None when there is
-    no metadata (a single .mcap file, or a recording that was killed)."""
+    """The bag's topics that hold messages, from its metadata.yaml, without reading a
+    message; None when there is no metadata (a single .mcap file, or a killed recording)."""
     meta = Path(path) / "metadata.yaml"
     if not meta.is_file():
         return None
     info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
-    return {t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []}
+    return {t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []
+            if t.get("message_count", 0) > 0}
 
 
 def file_finished(f: str | os.PathLike) -> bool:
@@ -247,7 +253,9 @@ def file_finished(f: str | os.PathLike) -> bool:
 
 def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str], None]
            ) -> Iterator[tuple[Path, Iterator[tuple[Any, Any, Any]]]]:
-    """(file, its (schema, channel, message) records) for every MCAP file of a bag."""
+    """(file, its (schema, channel, message) records) for every MCAP file of a bag.  Each
+    file stays open while its records are consumed; a consumer that stops early leaves it
+    to be closed when this generator is (garbage-)collected or closed."""
     for f in mcap_files(path):
         if not f.is_file():
             raise BagError(f"{f}: listed in the bag's metadata.yaml but missing")
@@ -261,17 +269,29 @@ def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str
             finished = _has_summary(fh)
             fh.seek(0)
             if finished:
-                yield f, make_reader(fh).iter_messages(topics=topics)
+                yield f, _named_errors(make_reader(fh, validate_crcs=True)
+                                       .iter_messages(topics=topics), f)
             else:
                 yield f, _recover(fh, f, topics, say)
 
 
-def _has_summary(fh: Any) -> bool:
-    """Whether the file ends with a footer and the closing magic (it was finished)."""
+def _named_errors(records: Iterator[Any], f: Path) -> Iterator[Any]:
+    """Records of a finished file; a corrupt one becomes a :class:`BagError` naming the file."""
     try:
-        return make_reader(fh).get_summary() is not None
-    except (McapError, ValueError, OSError, struct.error, StopIteration):
+        yield from records
+    except (McapError, ValueError, struct.error, ZstdError, RuntimeError) as exc:
+        raise BagError(f"{f}: corrupt MCAP data ({type(exc).__name__}: {exc}); the file was "
+                       f"closed properly, so this is damage, not a killed recording") from exc
+
+
+def _has_summary(fh: Any) -> bool:
+    """Whether the file was finished: it ends with the closing MCAP magic (after the footer;
+    a finished file may still have no summary section, and is then read in order)."""
+    fh.seek(0, os.SEEK_END)
+    if fh.tell() < 2 * len(MCAP0_MAGIC):
         return False
+    fh.seek(-len(MCAP0_MAGIC), os.SEEK_END)
+    return fh.read(len(MCAP0_MAGIC)) == MCAP0_MAGIC
 
 
 def _decoded(messages: Iterator[tuple[Any, Any, Any]], f: Path,
@@ -307,6 +327,10 @@ def _recover(fh: Any, f: Path, topics: list[str] | None,
             count += 1
             last = record[2].log_time
             yield record
+    except CRCValidationError as exc:
+        say(f"{f}: the recording was not closed (killed?), and a chunk's checksum is wrong "
+            f"({exc}); read {count} messages{_until(last)}; reading stops at the damaged "
+            f"chunk, and every chunk after it is lost too")
     except (McapError, ValueError, struct.error, ZstdError) as exc:
         size, at = f.stat().st_size, _whole_records_end(fh)
         where = (f"ends after its last finished chunk at byte {size}" if at >= size else

@@ -125,7 +125,7 @@ def _profile(refs: list[tuple[float, float]]) -> list[tuple[float, float]]:
     """(start, reference) of each change of the reference (repeats of the same value, as a
     latched topic re-sends it, do not start a segment)."""
     out: list[tuple[float, float]] = []
-    for t, r in sorted(refs):
+    for t, r in sorted(refs, key=lambda tr: tr[0]):           # stable: arrival order kept
         if not out or r != out[-1][1]:
             out.append((t, r))
     return out

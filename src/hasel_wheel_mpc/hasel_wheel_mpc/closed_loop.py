@@ -180,8 +180,9 @@ def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11
     for (t0, ref), t1 in zip(profile, bounds[1:]):
         seg = (t >= t0) & (t < t1)
         steady = seg & (t >= t1 - window)
-        ss = abs(np.mean(v[steady]) - ref) / ref * 100.0
-        nrmse = float(np.sqrt(np.mean((v[steady] - ref) ** 2))) / ref
+        # relative to the reference: undefined for a stop (ref = 0)
+        ss = abs(np.mean(v[steady]) - ref) / ref * 100.0 if ref else math.nan
+        nrmse = float(np.sqrt(np.mean((v[steady] - ref) ** 2))) / ref if ref else math.nan
         inside = np.flatnonzero(seg & (np.abs(v - ref) <= 0.02 * ref))
         settle = float(t[inside[0]] - t0) if inside.size else math.nan
         trans = math.nan

@@ -86,3 +86,34 @@ def test_the_command_line_prints_each_wheel(bag, tmp_path, capsys):
         b.add_topic("/x", topics.REFERENCE.type, topics.REFERENCE.qos)
     assert main(["bag", "metrics", str(empty)]) == 1
     assert "no wheel with a reference_speed topic" in capsys.readouterr().err
+
+
+def test_a_declared_but_empty_true_state_falls_back_to_the_observer(tmp_path):
+    path = tmp_path / "real"
+    st, ref = topics.TRUE_STATE, topics.REFERENCE
+    with BagWriter(path) as b:
+        b.add_topic("/w3/reference_speed", ref.type, ref.qos)
+        b.add_topic("/w3/sim/true_state", st.type, st.qos)       # declared, never written
+        b.add_topic("/w3/state_estimate", st.type, st.qos)
+        b.write("/w3/reference_speed", {"data": 2.0}, 0)
+        for k in range(3000):
+            t = k / RATE
+            b.write("/w3/state_estimate", samples.state_msg(t, 0.0, 2.02, 0, 0.0, 0.0, 0),
+                    round(t * 1e9))
+    (w,) = bag_metrics(path)
+    assert w.speed_source == "/w3/state_estimate"
+    assert w.segments[0].steady_error == pytest.approx(1.0, rel=1e-6)
+
+
+def test_a_stop_segment_has_no_relative_error_instead_of_a_crash(tmp_path):
+    path = tmp_path / "stop"
+    st, ref = topics.TRUE_STATE, topics.REFERENCE
+    with BagWriter(path) as b:
+        b.add_topic("/w4/reference_speed", ref.type, ref.qos)
+        b.add_topic("/w4/sim/true_state", st.type, st.qos)
+        b.write("/w4/reference_speed", {"data": 0.0}, 0)
+        for k in range(300):
+            b.write("/w4/sim/true_state", samples.state_msg(k / RATE, 0.0, 0.0, 0, 0.0, 0.0, 0),
+                    round(k / RATE * 1e9))
+    (w,) = bag_metrics(path)
+    assert math.isnan(w.segments[0].steady_error) and math.isnan(w.segments[0].nrmse)
