@@ -150,6 +150,10 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
         assert (tmp_path / name).stat().st_size > 5000
     per_trial = on_disk["metrics"]["after"]["simulation"]["per_trial"]
     assert set(per_trial) == {t.name for t in com_identification.trials}
+    prediction = on_disk["metrics"]["after"]["prediction"]
+    assert set(prediction) == {t.name for t in com_identification.trials}
+    assert all(0.0 <= p["whiteness_outside"] <= 1.0 and p["rms_rad"] > 0
+               for p in prediction.values())
     # the physical values come with intervals that hold the truth
     lo, hi = on_disk["effects"][0]["physical_ci95"]["torque_N_m"]
     assert lo < 0.004 < hi and hi - lo < 0.001
