@@ -27,6 +27,7 @@ setup(
     entry_points={
         "console_scripts": [
             "hasel_wheel = hasel_wheel_mpc.cli:main",
+            "hasel_wheel_bag = hasel_wheel_mpc.bag_cli:main",
             "observer_node = hasel_wheel_mpc.observer_node:main",
             "mpc_node = hasel_wheel_mpc.mpc_node:main",
         ],

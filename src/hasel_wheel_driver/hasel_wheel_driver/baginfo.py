@@ -17,9 +17,8 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
-import yaml
 
-from .bagio import file_finished, mcap_files, read_raw
+from .bagio import bag_configuration, file_finished, mcap_files, read_raw
 
 GAP_FACTOR = 3.0        # an interval this many nominal periods long is a gap
 PERIOD_SAMPLES = 1000   # intervals the nominal period is taken from
@@ -68,7 +67,7 @@ class BagInfo:
             out.append(f"  {t.topic:<{width}}  {t.count:>8}  {t.rate_hz:>9.2f}  "
                        f"{t.max_interval_s:>11.4f}  {t.gaps:>5}  {t.type}")
         if self.configuration:
-            out.append("  configuration (metadata.yaml custom_data):")
+            out.append("  configuration (metadata.yaml custom_data, or the MCAP configuration records):")
             for k, v in self.configuration.items():
                 first = str(v).splitlines()[0] if str(v) else ""
                 more = len(str(v).splitlines()) - 1
@@ -117,14 +116,6 @@ class _Running:
         return i
 
 
-def _configuration(path: Path) -> dict[str, str]:
-    meta = path / "metadata.yaml"
-    if not meta.is_file():
-        return {}
-    info = yaml.safe_load(meta.read_text()).get("rosbag2_bagfile_information", {})
-    return {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
-
-
 def bag_info(path: str | os.PathLike,
              progress: Callable[[int], None] | None = None) -> BagInfo:
     """Read a bag (directory or .mcap file) once and summarise it as a :class:`BagInfo`
@@ -151,4 +142,4 @@ def bag_info(path: str | os.PathLike,
     topics = {name: r.finish(start) for name, r in running.items()}
     files = [(f.name, f.stat().st_size, file_finished(f)) for f in mcap_files(p)]
     return BagInfo(str(p), files, start, ((end - start) / 1e9) if n else 0.0, n, topics,
-                   _configuration(p) if p.is_dir() else {}, said)
+                   bag_configuration(p), said)

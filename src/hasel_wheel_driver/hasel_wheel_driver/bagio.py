@@ -19,7 +19,8 @@ from typing import Any, Callable, Iterator, Mapping
 import yaml
 from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
-from mcap.stream_reader import CRCValidationError
+from mcap.records import Metadata
+from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder behind mcap_ros2's Writer
@@ -36,6 +37,8 @@ except ImportError:                     # pragma: no cover
 ROS_DISTRO = "jazzy"
 METADATA_VERSION = 9
 MCAP0_MAGIC = b"\x89MCAP0\r\n"       # the first (and last) 8 bytes of an MCAP file
+#: Name of the MCAP metadata records that carry the run's configuration (custom_data).
+CONFIG_RECORD = "hasel_wheel/configuration"
 
 
 class BagError(RuntimeError):
@@ -108,8 +111,19 @@ class BagWriter:
         self._channels: dict[str, _Channel] = {}
         self._t_min: int | None = None
         self._t_max: int | None = None
-        self.custom_data = dict(custom_data or {})
+        self.custom_data: dict[str, str] = {}
         self._closed = False
+        self.add_custom_data(custom_data or {})
+
+    def add_custom_data(self, data: Mapping[str, str]) -> None:
+        """Add strings to the bag's configuration: metadata.yaml's custom_data, and at once an
+        MCAP metadata record (:data:`CONFIG_RECORD`), so even a killed recording keeps it."""
+        bad = {k: type(v).__name__ for k, v in data.items() if not isinstance(v, str)}
+        if bad:
+            raise BagError(f"custom data must be strings (YAML text for structures); got {bad}")
+        if data:
+            self.custom_data.update(data)
+            self._mcap.add_metadata(CONFIG_RECORD, dict(data))
 
     def add_topic(self, topic: str, datatype: str, qos: QosSpec) -> None:
         """Declare a topic before writing to it (its schema is embedded once per type)."""
@@ -184,6 +198,36 @@ class BagWriter:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def bag_configuration(path: str | os.PathLike) -> dict[str, str]:
+    """The configuration a bag was recorded with (key -> text): metadata.yaml's custom_data,
+    else (a killed recording, or a lone .mcap file) the :data:`CONFIG_RECORD` metadata
+    records of its first MCAP file; {} when there is none."""
+    p = Path(path)
+    meta = p / "metadata.yaml"
+    if p.is_dir() and meta.is_file():
+        info = yaml.safe_load(meta.read_text()).get("rosbag2_bagfile_information", {})
+        return {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
+    files = mcap_files(p)
+    out: dict[str, str] = {}
+    if not files or not files[0].is_file():
+        return out
+    with open(files[0], "rb") as fh:
+        if _has_summary(fh):
+            fh.seek(0)
+            records = make_reader(fh).iter_metadata()
+        else:                      # killed: scan the top-level records (chunks not opened)
+            fh.seek(0)
+            records = (r for r in StreamReader(fh, emit_chunks=True).records
+                       if isinstance(r, Metadata))
+        try:
+            for record in records:
+                if record.name == CONFIG_RECORD:
+                    out.update(record.metadata)
+        except (McapError, ValueError, struct.error, EOFError):
+            pass                   # a file cut inside a record: what was read before it
+    return out
 
 
 def mcap_files(path: str | os.PathLike) -> list[Path]:

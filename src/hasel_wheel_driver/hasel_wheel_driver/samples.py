@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import numpy as np
+
 ENCODER_COUNTS = 1024
 #: One encoder count [rad] (10-bit absolute encoder).
 ENCODER_COUNT = 2.0 * math.pi / ENCODER_COUNTS
@@ -67,6 +69,32 @@ def telemetry_msg(s: TelemetrySample, frame_id: str = "wheel") -> dict:
             "eta": s.eta, "eta_unwrapped": s.eta_unwrapped, "active_mask": s.active_mask,
             "hv_monitor": s.hv_monitor, "current_monitor": s.current_monitor,
             "last_command_sequence": s.last_command_sequence, "fault_flags": s.fault_flags}
+
+
+def telemetry_from_msg(msg) -> TelemetrySample:
+    """The core's sample of a WheelTelemetry message (an rclpy message, a message decoded from
+    a bag, or anything with its fields as attributes).  ``t`` is the device clock
+    (device_time_us * 1e-6 s), free of the host's receive jitter."""
+    return TelemetrySample(
+        msg.device_time_us * 1e-6, int(msg.device_time_us), int(msg.sequence),
+        int(msg.encoder_raw), float(msg.angle), int(msg.q), int(msg.eta), int(msg.eta_unwrapped),
+        int(msg.active_mask), float(msg.hv_monitor), float(msg.current_monitor),
+        int(msg.last_command_sequence), int(msg.fault_flags))
+
+
+class _Fields:
+    def __init__(self, d: dict) -> None:
+        self.__dict__.update(d)
+
+
+def as_received(s: TelemetrySample) -> TelemetrySample:
+    """``s`` as a node receives it through a WheelTelemetry message: the device clock as
+    ``t`` and the monitors as float32.  The embedded runner's controller sees this, so a
+    replay from the bag computes exactly what the run computed."""
+    m = telemetry_msg(s)
+    m["hv_monitor"] = float(np.float32(m["hv_monitor"]))
+    m["current_monitor"] = float(np.float32(m["current_monitor"]))
+    return telemetry_from_msg(_Fields(m))
 
 
 def joint_state_msg(s: TelemetrySample, joint: str = "wheel_joint") -> dict:

@@ -4,6 +4,10 @@
     hasel_wheel bag info killed_run/ --json        # the same as JSON
     hasel_wheel bag metrics out/demo/bag           # per wheel and reference segment
     hasel_wheel bag export out/demo/bag --out csv/ --topics /wheel0/telemetry   # CSV per topic
+    hasel_wheel bag replay out/demo/bag            # re-run observer + MPC, compare (exact)
+    hasel_wheel bag replay out/demo/bag --set mpc.brake_threshold=0.2   # what would change
+
+Under ROS 2 the same tools are ``ros2 run hasel_wheel_mpc hasel_wheel_bag <tool> ...``.
 
 Bags are rosbag2 directories (``metadata.yaml`` + ``*.mcap``) or single ``.mcap`` files,
 from the embedded runner or from ``ros2 bag record -s mcap``; a recording that was killed is
@@ -15,6 +19,8 @@ import argparse
 import json
 import sys
 from dataclasses import asdict
+
+import yaml
 
 from hasel_wheel_driver.bagio import BagError
 from hasel_wheel_driver.bagexport import export_csv
@@ -76,10 +82,38 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0 if report else 1
 
 
+def _override(text: str) -> tuple[str, object]:
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise argparse.ArgumentTypeError(f"{text!r}: expected SECTION.FIELD=VALUE, e.g. "
+                                         f"mpc.brake_threshold=0.2 or estimator.gain=null")
+    return key.strip(), yaml.safe_load(value)
+
+
+def cmd_replay(args: argparse.Namespace) -> int:
+    """Replay a bag's telemetry through the controller; print what differs."""
+    from hasel_wheel_sim.params import ParameterError
+
+    from .replay import replay_bag
+    try:
+        reports = replay_bag(args.bag, dict(args.set or []), args.namespace,
+                             warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+    except (BagError, ParameterError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for r in reports:
+        print(r.text())
+    return 1 if args.check and not all(r.identical for r in reports) else 0
+
+
 def add_parsers(sub) -> None:
-    """Add ``bag`` (``info``, ``metrics``, ``export``) to the ``hasel_wheel`` sub-command parser."""
-    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, export)")
-    tools = b.add_subparsers(dest="bag_command", required=True)
+    """Add ``bag`` (``info``, ``metrics``, ``export``, ``replay``) to the ``hasel_wheel`` sub-command parser."""
+    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, export, replay)")
+    add_tools(b.add_subparsers(dest="bag_command", required=True))
+
+
+def add_tools(tools) -> None:
+    """Add the tools (``info``, ``metrics``, ``export``, ``replay``) to a sub-command parser."""
     i = tools.add_parser("info", help="topics, counts, rates, gaps, duration, configuration")
     i.add_argument("bag", help="bag directory or .mcap file")
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -96,3 +130,28 @@ def add_parsers(sub) -> None:
     e.add_argument("--out", required=True, help="directory for the CSV files")
     e.add_argument("--topics", default=None, help="comma-separated topics (default: all)")
     e.set_defaults(func=cmd_export)
+    r = tools.add_parser("replay", help="feed the telemetry through observer, estimator and MPC "
+                                        "again; compare with the recorded estimates and decisions")
+    r.add_argument("bag", help="bag directory or .mcap file")
+    r.add_argument("--namespace", action="append", default=None,
+                   help="wheel namespace to replay, e.g. /wheel0 (repeatable; default: all)")
+    r.add_argument("--set", action="append", type=_override, metavar="SECTION.FIELD=VALUE",
+                   help="change the recorded controller configuration (repeatable), e.g. "
+                        "mpc.brake_threshold=0.2, observer.accel_noise=0.1, estimator.gain=null, "
+                        "model.wheel.tau_f=1.2")
+    r.add_argument("--check", action="store_true",
+                   help="exit 1 when anything differs from the recording")
+    r.set_defaults(func=cmd_replay)
+
+
+def main(argv=None) -> int:
+    """``hasel_wheel_bag <tool> ...`` (the ``ros2 run hasel_wheel_mpc hasel_wheel_bag`` entry)."""
+    ap = argparse.ArgumentParser(prog="hasel_wheel_bag", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_tools(ap.add_subparsers(dest="bag_command", required=True))
+    args = ap.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

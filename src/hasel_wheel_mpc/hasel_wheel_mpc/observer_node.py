@@ -36,14 +36,6 @@ from .observer import Observer, ObserverConfig
 ESTIMATOR_MODES = ("tracking", "paper")
 
 
-def telemetry_sample(msg: WheelTelemetry) -> samples.TelemetrySample:
-    """The core's sample of a WheelTelemetry message; t is the device clock [s] (no host jitter)."""
-    return samples.TelemetrySample(
-        msg.device_time_us * 1e-6, msg.device_time_us, msg.sequence, msg.encoder_raw, msg.angle,
-        msg.q, msg.eta, msg.eta_unwrapped, msg.active_mask, msg.hv_monitor, msg.current_monitor,
-        msg.last_command_sequence, msg.fault_flags)
-
-
 def _warm_up(params: WheelParams) -> None:
     """Load (or compile) the observer's model flow now, not at the first telemetry sample."""
     obs = Observer(params)
@@ -178,7 +170,7 @@ class ObserverNode(Node):
         self.reference = msg.reference_speed
 
     def _on_telemetry(self, msg: WheelTelemetry) -> None:
-        s = telemetry_sample(msg)
+        s = samples.telemetry_from_msg(msg)
         self.received += 1
         self.window_count += 1
         if self.last_seq is not None and s.sequence > self.last_seq + 1:

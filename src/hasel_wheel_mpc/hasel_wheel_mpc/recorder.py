@@ -90,5 +90,9 @@ class Recorder:
         self._ensure(ns, topics.REFERENCE)
         self.bag.write(topics.qualified(topics.REFERENCE, ns), {"data": value}, self._ns_time(t))
 
+    def configuration(self, data: Mapping[str, str]) -> None:
+        """Add ``{key: text}`` to the bag's recorded configuration (custom_data)."""
+        self.bag.add_custom_data(data)
+
     def close(self) -> None:
         self.bag.close()

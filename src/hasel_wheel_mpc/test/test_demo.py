@@ -131,6 +131,9 @@ def test_closed_loop_demo_writes_bag_plots_and_table(tmp_path, capsys):
     assert all(s.candidates_evaluated >= 15 for s in status if not s.braking)
     est = topics_seen["/wheel0/state_estimate"]
     assert len(est) == len(topics_seen["/wheel0/telemetry"]) > 10000
+    # the recorded run re-computes exactly from its own bag (wall-clock deadline included)
+    assert cli.main(["bag", "replay", str(out / "bag"), "--check"]) == 0
+    assert "IDENTICAL" in capsys.readouterr().out
 
 
 def test_closed_loop_demo_refuses_a_bad_hold_scale(tmp_path, capsys):

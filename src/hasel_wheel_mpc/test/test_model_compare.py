@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_mpc import closed_loop
+from hasel_wheel_mpc import closed_loop, controller
 from hasel_wheel_mpc.model_compare import compare_controllers, tracking_metrics
 from hasel_wheel_mpc.observer import ObserverConfig
 from hasel_wheel_sim.effects import effects_from_mapping
@@ -103,14 +103,14 @@ def test_the_controller_gets_its_own_model_and_the_plant_keeps_its_own(monkeypat
             seen[self.name] = (params, extensions)
             return self.cls(params, extensions, **kw)
 
-    monkeypatch.setattr(closed_loop, "Observer", Spy("observer", closed_loop.Observer))
-    monkeypatch.setattr(closed_loop, "Mpc", Spy("mpc", closed_loop.Mpc))
+    monkeypatch.setattr(controller, "Observer", Spy("observer", controller.Observer))
+    monkeypatch.setattr(controller, "Mpc", Spy("mpc", controller.Mpc))
     log = closed_loop.run_closed_loop(PROFILE, 0.2, params=plant_params, controller_params=ctrl,
                                       controller_extensions=ext)
     assert seen == {"observer": (ctrl, ext), "mpc": (ctrl, ext)}
     assert len(log.t) > 0
     closed_loop.run_closed_loop(PROFILE, 0.2, params=plant_params)      # default: the plant's model
-    assert seen == {"observer": (plant_params, None), "mpc": (plant_params, None)}
+    assert seen == {"observer": (plant_params, Extensions()), "mpc": (plant_params, Extensions())}
 
 
 def test_tracking_metrics_leave_out_the_settling_time():

@@ -1,0 +1,246 @@
+"""The speed controller of the embedded runner as one object: observer -> estimator -> MPC.
+
+:class:`SpeedController` takes device samples one at a time (``step(sample, reference)``)
+and answers with the estimate and, at decision points, the MPC's decision.  The closed loop
+(:func:`~hasel_wheel_mpc.closed_loop.run_closed_loop`) feeds it from the plant; the bag
+replay (:mod:`~hasel_wheel_mpc.replay`) feeds it from a recording.  Both hand it the sample
+as a node receives it (:func:`hasel_wheel_driver.samples.as_received`), so a recorded run
+can be re-computed exactly.
+
+:class:`ControllerConfig` is everything that decides what the controller does (its model,
+the observer's and the MPC's tuning, the estimator); it is written into the bag as YAML
+(``<namespace>/controller.yaml`` in the bag's configuration) and read back by the replay.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, NamedTuple
+
+import numpy as np
+import yaml
+
+from hasel_wheel_driver.samples import TelemetrySample
+from hasel_wheel_sim.model import Extensions
+from hasel_wheel_sim.model_file import extensions_to_yaml_dict, model_from_mapping
+from hasel_wheel_sim.params import ParameterError, WheelParams
+
+from .disturbance import IntegralEstimator
+from .mpc import Decision, Mpc, MpcConfig
+from .observer import Estimate, Observer, ObserverConfig
+
+D = math.radians
+#: The command that starts a wheel (sequence 1), and the angles [rad] the first pad runs with.
+START_ANGLES = (D(3.0), D(22.0))
+#: Decide on an idle wheel after this many samples with HV off [samples].
+IDLE_SAMPLES = 150
+#: Re-decide on a new reference only if the current actuator stays on this long [s].
+REDECIDE_MIN_TIME = 0.02
+SPEED_SOURCES = ("observer", "finite_difference")
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """What the controller is: model, tuning and estimator (SI units, angles rad).
+
+    ``estimator_gain`` None: no disturbance estimator.  ``speed_source`` 'observer' or
+    'finite_difference' (what the MPC sees as xi2; with the finite difference the observer's
+    disturbance is not used either).
+    """
+
+    params: WheelParams = field(default_factory=WheelParams)
+    extensions: Extensions = field(default_factory=Extensions)
+    observer: ObserverConfig = field(default_factory=ObserverConfig)
+    mpc: MpcConfig = field(default_factory=MpcConfig)
+    estimator_gain: float | None = 0.1       # K [1 per cycle]
+    estimator_mode: str = "tracking"         # 'tracking' or 'paper' ((57)-(58))
+    estimator_gate: float = 0.64             # [rad/s]
+    speed_source: str = "observer"
+
+    def __post_init__(self) -> None:
+        if self.speed_source not in SPEED_SOURCES:
+            raise ValueError(f"speed_source = {self.speed_source!r}: expected one of "
+                             f"{list(SPEED_SOURCES)}")
+
+    def to_yaml(self) -> str:
+        """The configuration as YAML text (floats in full precision: :meth:`from_yaml` gives
+        back an equal configuration)."""
+        data = {"model": {"wheel": self.params.to_yaml_dict(),
+                          "extensions": extensions_to_yaml_dict(self.extensions)},
+                "observer": _plain(dataclasses.asdict(self.observer)),
+                "mpc": _plain(dataclasses.asdict(self.mpc)),
+                "estimator": {"gain": self.estimator_gain, "mode": self.estimator_mode,
+                              "gate": self.estimator_gate},
+                "speed_source": self.speed_source}
+        return yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
+
+    @classmethod
+    def from_yaml(cls, text: str, where: str = "controller.yaml") -> "ControllerConfig":
+        """Parse :meth:`to_yaml`'s text; a wrong section or field raises ParameterError."""
+        data = yaml.safe_load(text)
+        return cls.from_mapping(data, where)
+
+    @classmethod
+    def from_mapping(cls, data: Any, where: str = "controller") -> "ControllerConfig":
+        """Build from the mapping of :meth:`to_yaml` (every section optional)."""
+        if not isinstance(data, Mapping):
+            raise ParameterError(f"{where}: expected a mapping with sections model, observer, "
+                                 f"mpc, estimator, speed_source; got {type(data).__name__}")
+        unknown = sorted(set(data) - {"model", "observer", "mpc", "estimator", "speed_source"})
+        if unknown:
+            raise ParameterError(f"{where}: unknown section(s) {unknown}; expected model, "
+                                 f"observer, mpc, estimator, speed_source")
+        kw: dict[str, Any] = {}
+        if "model" in data:
+            kw["params"], kw["extensions"] = model_from_mapping(data["model"], f"{where}: model")
+        if "observer" in data:
+            kw["observer"] = _dataclass_from(ObserverConfig, data["observer"], f"{where}: observer")
+        if "mpc" in data:
+            kw["mpc"] = _dataclass_from(MpcConfig, data["mpc"], f"{where}: mpc")
+        est = data.get("estimator") or {}
+        unknown = sorted(set(est) - {"gain", "mode", "gate"})
+        if unknown:
+            raise ParameterError(f"{where}: estimator: unknown field(s) {unknown}; expected "
+                                 f"gain, mode, gate")
+        for name in ("gain", "mode", "gate"):
+            if name in est:
+                kw[f"estimator_{name}"] = est[name]
+        if "speed_source" in data:
+            kw["speed_source"] = data["speed_source"]
+        try:
+            return cls(**kw)
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(f"{where}: {exc}") from exc
+
+    def with_overrides(self, overrides: Mapping[str, Any]) -> "ControllerConfig":
+        """A copy with ``{'section.field': value}`` changed, e.g. ``{'mpc.brake_threshold':
+        0.4, 'estimator.gain': None, 'speed_source': 'observer'}``; model fields are
+        ``model.wheel.<name>`` and ``model.extensions.<name>`` (SI values, units as in the
+        model file)."""
+        data = yaml.safe_load(self.to_yaml())
+        for key, value in overrides.items():
+            path = key.split(".")
+            node = data
+            for part in path[:-1]:
+                if not isinstance(node, dict) or part not in node:
+                    raise ParameterError(f"override {key!r}: no section {part!r}; known: "
+                                         f"{sorted(node) if isinstance(node, dict) else []}")
+                node = node[part]
+            if not isinstance(node, dict) or path[-1] not in node:
+                raise ParameterError(f"override {key!r}: no field {path[-1]!r}; known: "
+                                     f"{sorted(node) if isinstance(node, dict) else []}")
+            if isinstance(node[path[-1]], dict) and "value" in node[path[-1]]:
+                node[path[-1]]["value"] = value        # a {value, unit} model field
+            else:
+                node[path[-1]] = value
+        return ControllerConfig.from_mapping(data, "overrides")
+
+
+def _plain(d: dict) -> dict:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
+
+
+def _dataclass_from(cls, data: Any, where: str):
+    if not isinstance(data, Mapping):
+        raise ParameterError(f"{where}: expected a mapping of fields, got {type(data).__name__}")
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        raise ParameterError(f"{where}: unknown field(s) {unknown}; known: {sorted(names)}")
+    kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items()}
+    try:
+        return cls(**kw)
+    except (TypeError, ValueError) as exc:
+        raise ParameterError(f"{where}: {exc}") from exc
+
+
+class ControlStep(NamedTuple):
+    """What the controller made of one sample."""
+
+    estimate: Estimate
+    d_before: float              # the estimator's d [rad/s] when the sample arrived
+    d: float                     # d [rad/s] after this sample (changes at switch-offs)
+    speed: float                 # xi2 the MPC sees [rad/s] (observer or finite difference)
+    decision: Decision | None    # the MPC's decision at this sample, if it decided
+
+
+class SpeedController:
+    """Observer, disturbance estimator and MPC, with the decision points of paper Sec. V-B.
+
+    Decides at each switch-on of the actuator of interest, on an idle wheel after
+    ``IDLE_SAMPLES`` samples with HV off, and once more at once when the reference changes
+    while the actuator is on with at least ``REDECIDE_MIN_TIME`` left (the waiting command is
+    then replaced before it latches).  ``clock`` [s] is the MPC's clock for its deadline
+    (default wall time).
+    """
+
+    def __init__(self, config: ControllerConfig | None = None,
+                 clock: Callable[[], float] | None = None) -> None:
+        cfg = self.config = config or ControllerConfig()
+        self.observer = Observer(cfg.params, cfg.extensions, config=cfg.observer)
+        self.mpc = Mpc(cfg.params, cfg.extensions, config=cfg.mpc,
+                       **({"clock": clock} if clock is not None else {}))
+        self.estimator = (IntegralEstimator(gain=cfg.estimator_gain, mode=cfg.estimator_mode,
+                                            gate=cfg.estimator_gate)
+                          if cfg.estimator_gain else None)
+        self.observer.command_sent(0, *START_ANGLES)
+        self._angles = {0: START_ANGLES}
+        self._prev_q = 0
+        self._idle = 0
+        self._cycle: list[float] = []
+        self._queued: list[float | None] = []    # predictions of cycles starting at switch-offs
+        self._window_pred: float | None = None
+        self._prev: tuple[float, float] | None = None
+        self._fd = 0.0
+        self._last_ref: float | None = None
+
+    @property
+    def d(self) -> float:
+        """The disturbance estimate [rad/s] (0 without an estimator)."""
+        return self.estimator.d if self.estimator else 0.0
+
+    def step(self, s: TelemetrySample, reference: float) -> ControlStep:
+        """One device sample ``s`` with the reference [rad/s] in force at its time."""
+        e = self.observer.step(s)
+        d_before = self.d
+        if self._prev is not None and s.t > self._prev[0]:
+            self._fd = (s.angle - self._prev[1]) / (s.t - self._prev[0])
+        self._prev = (s.t, s.angle)
+        observer = self.config.speed_source == "observer"
+        speed = e.xi2 if observer else self._fd
+        self._cycle.append(speed)
+        self._idle = 0 if s.q else self._idle + 1
+        switched_on = s.q == 1 and self._prev_q == 0
+        switched_off = s.q == 0 and self._prev_q == 1
+        self._prev_q = s.q
+        if switched_off:
+            # the window [previous switch-off, this one) is a cycle some decision predicted
+            if self.estimator and self._window_pred is not None and len(self._cycle) > 1:
+                self.estimator.step(float(np.mean(self._cycle[:-1])), self._window_pred,
+                                    reference)
+            self._window_pred = self._queued.pop(0) if self._queued else None
+            self._cycle = [speed]
+        d = self.d
+        last = reference if self._last_ref is None else self._last_ref
+        redecide = (reference != last and s.q == 1 and not switched_on
+                    and e.deact_counter > REDECIDE_MIN_TIME * max(speed, 0.1))
+        self._last_ref = reference
+        dec = None
+        if switched_on or self._idle == IDLE_SAMPLES or redecide:
+            pa_now, pd_now = self._angles.get(s.last_command_sequence, START_ANGLES)
+            dec = self.mpc.decide(e.xi1, speed, s.eta_unwrapped, pa_now, pd_now, reference, d,
+                                  e.accel_coefficients if observer else (0.0, 0.0, 0.0))
+            if not switched_on:      # idle wheel: the next pad from the measured sector
+                n_a = (int(math.floor(e.xi1 / (math.pi / 8))) + 1) % 16
+                dec = dec._replace(command=dec.command._replace(n_a=n_a))
+            c = dec.command
+            self._angles[c.sequence] = (c.phi_a, c.phi_d)
+            self.observer.command_sent(c.sequence, c.phi_a, c.phi_d)
+            prediction = None if dec.braking else dec.predicted_speed - d   # model-only mean
+            if redecide and self._queued:
+                self._queued[-1] = prediction
+            else:
+                self._queued.append(prediction)
+            self._idle = 0
+        return ControlStep(e, d_before, d, speed, dec)
