@@ -13,19 +13,27 @@ import csv
 import os
 import warnings
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 from .bagio import read_messages
 
 
 def flatten(msg: Any, prefix: str = "") -> dict[str, Any]:
     """{dotted field name: value} of a decoded message (nested messages and arrays
-    flattened; strings kept as they are)."""
+    flattened; strings kept as they are).  A message may be decoded by mcap-ros2-support
+    (fields in ``__slots__``), by :mod:`.cdr_flat` (a namedtuple) or be a dict of fields."""
     out: dict[str, Any] = {}
-    slots = getattr(msg, "__slots__", None)
-    if slots is not None:
-        for name in slots:
-            out.update(flatten(getattr(msg, name), f"{prefix}{name}."))
+    names = getattr(msg, "_fields", None) if isinstance(msg, tuple) else getattr(
+        msg, "__slots__", None)
+    if isinstance(msg, Mapping):
+        items = msg.items()
+    elif names is not None:
+        items = ((name, getattr(msg, name)) for name in names)
+    else:
+        items = None
+    if items is not None:
+        for name, value in items:
+            out.update(flatten(value, f"{prefix}{name}."))
         return out
     key = prefix[:-1]
     if isinstance(msg, (list, tuple)):

@@ -27,6 +27,7 @@ from mcap_ros2._dynamic import serialize_dynamic  # the CDR encoder behind mcap_
 from mcap_ros2.decoder import DecoderFactory
 
 from . import interfaces
+from .cdr_flat import CDR_LE, flat_decoder
 from .topics import QosSpec
 
 try:                                    # mcap's own zstd decoder (a dependency of mcap)
@@ -261,9 +262,7 @@ def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
     naming it.  ``select(topic)``, when given, picks topics by name before anything is
     decoded (e.g. by suffix, when the namespaces are not known in advance)."""
     say = warn or (lambda text: warnings.warn(text, stacklevel=3))
-    for f, records in _files(path, topics, say):
-        if select is not None:
-            records = (r for r in records if select(r[1].topic))
+    for f, records in _files(path, topics, say, select):
         yield from _decoded(records, f, say)
 
 
@@ -295,11 +294,13 @@ def file_finished(f: str | os.PathLike) -> bool:
         return _has_summary(fh)
 
 
-def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str], None]
+def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str], None],
+           select: Callable[[str], bool] | None = None
            ) -> Iterator[tuple[Path, Iterator[tuple[Any, Any, Any]]]]:
-    """(file, its (schema, channel, message) records) for every MCAP file of a bag.  Each
-    file stays open while its records are consumed; a consumer that stops early leaves it
-    to be closed when this generator is (garbage-)collected or closed."""
+    """(file, its (schema, channel, message) records) for every MCAP file of a bag, only of
+    ``topics`` and of topics ``select`` accepts (when given).  Each file stays open while its
+    records are consumed; a consumer that stops early leaves it to be closed when this
+    generator is (garbage-)collected or closed."""
     for f in mcap_files(path):
         if not f.is_file():
             raise BagError(f"{f}: listed in the bag's metadata.yaml but missing")
@@ -313,10 +314,20 @@ def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str
             finished = _has_summary(fh)
             fh.seek(0)
             if finished:
-                yield f, _named_errors(make_reader(fh, validate_crcs=True)
-                                       .iter_messages(topics=topics), f)
+                reader = make_reader(fh, validate_crcs=True)
+                wanted = topics
+                summary = reader.get_summary() if select is not None else None
+                if summary is not None:
+                    # filter by channel before mcap orders messages by time: the unwanted
+                    # ones then never enter its queue (most of the time of a filtered read)
+                    wanted = {c.topic for c in summary.channels.values() if select(c.topic)
+                              and (topics is None or c.topic in topics)}
+                records = _named_errors(reader.iter_messages(topics=wanted), f)
             else:
-                yield f, _recover(fh, f, topics, say)
+                records = _recover(fh, f, topics, say)
+            if select is not None:
+                records = (r for r in records if select(r[1].topic))
+            yield f, records
 
 
 def _named_errors(records: Iterator[Any], f: Path) -> Iterator[Any]:
@@ -346,18 +357,34 @@ def _decoded(messages: Iterator[tuple[Any, Any, Any]], f: Path,
     for schema, channel, message in messages:
         decode = decoders.get(channel.id, ...)
         if decode is ...:
-            decode = None
-            try:
-                decode = factory.decoder_for(channel.message_encoding, schema)
-            except Exception as exc:             # a schema the ros2msg parser rejects
-                say(f"{f}: topic {channel.topic}: its schema cannot be read ({exc}); skipped")
-            else:
-                if decode is None:
-                    say(f"{f}: topic {channel.topic} ({channel.message_encoding}, schema "
-                        f"{schema.name if schema else 'none'}) has no ROS 2 decoder; skipped")
-            decoders[channel.id] = decode
+            decode = decoders[channel.id] = _decoder_for(factory, schema, channel, f, say)
         if decode is not None:
             yield channel.topic, message.log_time, decode(message.data)
+
+
+def _decoder_for(factory: DecoderFactory, schema: Any, channel: Any, f: Path,
+                 say: Callable[[str], None]) -> Callable[[bytes], Any] | None:
+    """The decoder of a channel: :mod:`.cdr_flat` for flat ROS 2 types (with the generic one
+    for big-endian data), mcap-ros2-support's for the rest, None (and a warning) if none."""
+    try:
+        generic = factory.decoder_for(channel.message_encoding, schema)
+    except Exception as exc:             # a schema the ros2msg parser rejects
+        say(f"{f}: topic {channel.topic}: its schema cannot be read ({exc}); skipped")
+        return None
+    if generic is None:
+        say(f"{f}: topic {channel.topic} ({channel.message_encoding}, schema "
+            f"{schema.name if schema else 'none'}) has no ROS 2 decoder; skipped")
+        return None
+    if channel.message_encoding != "cdr" or schema is None or schema.encoding != "ros2msg":
+        return generic
+    flat = flat_decoder(schema.name, schema.data.decode("utf-8", "replace"))
+    if flat is None:
+        return generic
+
+    def decode(data: bytes) -> Any:
+        return flat(data) if data[:2] == CDR_LE else generic(data)
+
+    return decode
 
 
 def _recover(fh: Any, f: Path, topics: list[str] | None,

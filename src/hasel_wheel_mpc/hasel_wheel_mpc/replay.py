@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Iterable, Mapping
 
 from hasel_wheel_driver import samples, topics
+from hasel_wheel_driver.bagexport import flatten
 from hasel_wheel_driver.bagio import BagError, bag_configuration, read_messages
 
 from .controller import ControllerConfig, SpeedController
@@ -110,19 +111,10 @@ class ReplayReport:
         return "\n".join(out)
 
 
-def _flat(msg: Any, prefix: str = "") -> dict[str, Any]:
-    """Fields of a message (decoded object or dict) as {'a.b': value}, header left out."""
-    items = msg.items() if isinstance(msg, Mapping) else (
-        (k, getattr(msg, k)) for k in msg.__slots__)
-    out: dict[str, Any] = {}
-    for k, v in items:
-        if k == "header":
-            continue
-        if isinstance(v, Mapping) or hasattr(v, "__slots__"):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[prefix + k] = v
-    return out
+def _flat(msg: Any) -> dict[str, Any]:
+    """Fields of a message (decoded, or a dict) as {'a.b': value}, headers left out (the
+    decision's time is compared as its log time; an estimate is paired by its stamp)."""
+    return {k: v for k, v in flatten(msg).items() if "header" not in k.split(".")}
 
 
 def _compare(recorded: Any, recomputed: Mapping[str, Any], t: float,
