@@ -14,7 +14,6 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -117,10 +116,10 @@ class _Running:
 
 
 def bag_info(path: str | os.PathLike,
-             progress: Callable[[int], None] | None = None) -> BagInfo:
+             progress: bool = False) -> BagInfo:
     """Read a bag (directory or .mcap file) once and summarise it as a :class:`BagInfo`
     (counts, rates [Hz], intervals [s], configuration, the reader's warnings).
-    ``progress(n)`` is called every 100,000 messages.  Gaps are not counted for a topic whose
+    ``progress``: a progress bar on stderr (on a terminal).  Gaps are not counted for a topic whose
     median interval is 0 (repeated stamps)."""
     p = Path(path)
     said: list[str] = []
@@ -128,10 +127,9 @@ def bag_info(path: str | os.PathLike,
     start: int | None = None
     end: int | None = None
     n = 0
-    for topic, type_, t, _data in read_raw(p, warn=said.append):
+    for topic, type_, t, _data in read_raw(p, warn=said.append,
+                                           progress="bag info" if progress else None):
         n += 1
-        if progress is not None and n % 100_000 == 0:
-            progress(n)
         start = t if start is None or t < start else start
         end = t if end is None or t > end else end
         r = running.get(topic)

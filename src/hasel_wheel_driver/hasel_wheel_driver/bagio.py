@@ -250,8 +250,8 @@ def mcap_files(path: str | os.PathLike) -> list[Path]:
 
 def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
                   warn: Callable[[str], None] | None = None,
-                  select: Callable[[str], bool] | None = None
-                  ) -> Iterator[tuple[str, int, Any]]:
+                  select: Callable[[str], bool] | None = None,
+                  progress: str | None = None) -> Iterator[tuple[str, int, Any]]:
     """Yield (topic, log_time_ns, decoded message) from a bag, in log-time order per file.
 
     A file that was never finished (the recorder was killed: no summary, maybe a record cut
@@ -260,18 +260,20 @@ def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
     was lost.  A channel whose messages cannot be decoded (a type without a ros2msg schema)
     is skipped with one warning.  A file that is not MCAP at all raises :class:`BagError`
     naming it.  ``select(topic)``, when given, picks topics by name before anything is
-    decoded (e.g. by suffix, when the namespaces are not known in advance)."""
+    decoded (e.g. by suffix, when the namespaces are not known in advance).  ``progress``,
+    when given, labels a progress bar on stderr (shown only on a terminal)."""
     say = warn or (lambda text: warnings.warn(text, stacklevel=3))
-    for f, records in _files(path, topics, say, select):
+    for f, records in _files(path, topics, say, select, progress):
         yield from _decoded(records, f, say)
 
 
 def read_raw(path: str | os.PathLike, topics: list[str] | None = None,
-             warn: Callable[[str], None] | None = None) -> Iterator[tuple[str, str, int, bytes]]:
+             warn: Callable[[str], None] | None = None,
+             progress: str | None = None) -> Iterator[tuple[str, str, int, bytes]]:
     """Yield (topic, type, log_time_ns, CDR bytes) from a bag without decoding (for counts,
-    rates and copies); files are handled as in :func:`read_messages`."""
+    rates and copies); files and ``progress`` are handled as in :func:`read_messages`."""
     say = warn or (lambda text: warnings.warn(text, stacklevel=3))
-    for _f, records in _files(path, topics, say):
+    for _f, records in _files(path, topics, say, progress=progress):
         for schema, channel, message in records:
             yield (channel.topic, schema.name if schema else "", message.log_time,
                    message.data)
@@ -295,7 +297,7 @@ def file_finished(f: str | os.PathLike) -> bool:
 
 
 def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str], None],
-           select: Callable[[str], bool] | None = None
+           select: Callable[[str], bool] | None = None, progress: str | None = None
            ) -> Iterator[tuple[Path, Iterator[tuple[Any, Any, Any]]]]:
     """(file, its (schema, channel, message) records) for every MCAP file of a bag, only of
     ``topics`` and of topics ``select`` accepts (when given).  Each file stays open while its
@@ -313,21 +315,36 @@ def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str
             fh.seek(0)
             finished = _has_summary(fh)
             fh.seek(0)
+            total = None
             if finished:
                 reader = make_reader(fh, validate_crcs=True)
                 wanted = topics
-                summary = reader.get_summary() if select is not None else None
-                if summary is not None:
+                summary = reader.get_summary() if (select or progress) else None
+                if summary is not None and select is not None:
                     # filter by channel before mcap orders messages by time: the unwanted
                     # ones then never enter its queue (most of the time of a filtered read)
                     wanted = {c.topic for c in summary.channels.values() if select(c.topic)
                               and (topics is None or c.topic in topics)}
+                if summary is not None and summary.statistics is not None:
+                    counts = summary.statistics.channel_message_counts
+                    total = sum(n for cid, n in counts.items() if wanted is None
+                                or summary.channels[cid].topic in wanted)
                 records = _named_errors(reader.iter_messages(topics=wanted), f)
             else:
                 records = _recover(fh, f, topics, say)
             if select is not None:
                 records = (r for r in records if select(r[1].topic))
+            if progress:
+                records = _progress_bar(records, f"{progress}: {f.name}", total)
             yield f, records
+
+
+def _progress_bar(records: Iterator[Any], label: str, total: int | None) -> Iterator[Any]:
+    """``records`` with a tqdm bar on stderr (left out when stderr is not a terminal)."""
+    from tqdm import tqdm
+    with tqdm(records, desc=label, total=total, unit=" msg", unit_scale=True, disable=None,
+              leave=False, mininterval=0.5) as bar:
+        yield from bar
 
 
 def _named_errors(records: Iterator[Any], f: Path) -> Iterator[Any]:

@@ -8,9 +8,8 @@ messages field by field.
 from __future__ import annotations
 
 import math
+import struct
 from typing import NamedTuple
-
-import numpy as np
 
 ENCODER_COUNTS = 1024
 #: One encoder count [rad] (10-bit absolute encoder).
@@ -92,8 +91,8 @@ def as_received(s: TelemetrySample) -> TelemetrySample:
     ``t`` and the monitors as float32.  The embedded runner's controller sees this, so a
     replay from the bag computes exactly what the run computed."""
     m = telemetry_msg(s)
-    m["hv_monitor"] = float(np.float32(m["hv_monitor"]))
-    m["current_monitor"] = float(np.float32(m["current_monitor"]))
+    for name in ("hv_monitor", "current_monitor"):       # float32 fields
+        m[name] = struct.unpack("<f", struct.pack("<f", m[name]))[0]
     return telemetry_from_msg(_Fields(m))
 
 

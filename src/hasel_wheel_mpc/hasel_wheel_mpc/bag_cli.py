@@ -4,6 +4,7 @@
     hasel_wheel bag info killed_run/ --json        # the same as JSON
     hasel_wheel bag metrics out/demo/bag           # per wheel and reference segment
     hasel_wheel bag export out/demo/bag --out csv/ --topics /wheel0/telemetry   # CSV per topic
+    hasel_wheel bag export out/demo/bag --out pq/ --format parquet              # Parquet
     hasel_wheel bag replay out/demo/bag            # re-run observer + MPC, compare (exact)
     hasel_wheel bag replay out/demo/bag --set mpc.brake_threshold=0.2   # what would change
 
@@ -23,22 +24,17 @@ from dataclasses import asdict
 import yaml
 
 from hasel_wheel_driver.bagio import BagError
-from hasel_wheel_driver.bagexport import export_csv
+from hasel_wheel_driver.bagexport import FORMATS, export
 from hasel_wheel_driver.baginfo import bag_info
 
 
 def cmd_info(args: argparse.Namespace) -> int:
     """Print what a bag holds."""
-    def progress(n: int) -> None:
-        print(f"\r  read {n:,} messages ...", end="", file=sys.stderr, flush=True)
-
     try:
-        info = bag_info(args.bag, progress=None if args.json else progress)
+        info = bag_info(args.bag, progress=True)
     except BagError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    if not args.json and info.messages >= 100_000:
-        print(file=sys.stderr)
     if args.json:
         print(json.dumps(asdict(info), indent=1, allow_nan=True))
     else:
@@ -51,7 +47,8 @@ def cmd_metrics(args: argparse.Namespace) -> int:
     from .bag_metrics import bag_metrics
     try:
         wheels = bag_metrics(args.bag, window=args.window,
-                             warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+                             warn=lambda text: print(f"warning: {text}", file=sys.stderr),
+                             progress=True)
     except BagError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -68,11 +65,12 @@ def cmd_metrics(args: argparse.Namespace) -> int:
 
 
 def cmd_export(args: argparse.Namespace) -> int:
-    """Write chosen topics as CSV files, one per topic."""
+    """Write chosen topics as CSV or Parquet files, one per topic."""
     topics = [t.strip() for t in args.topics.split(",") if t.strip()] if args.topics else None
     try:
-        report = export_csv(args.bag, args.out, topics,
-                            warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+        report = export(args.bag, args.out, topics, args.format,
+                        warn=lambda text: print(f"warning: {text}", file=sys.stderr),
+                        progress=True)
     except BagError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -97,7 +95,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from .replay import replay_bag
     try:
         reports = replay_bag(args.bag, dict(args.set or []), args.namespace,
-                             warn=lambda text: print(f"warning: {text}", file=sys.stderr))
+                             warn=lambda text: print(f"warning: {text}", file=sys.stderr),
+                             progress=True)
     except (BagError, ParameterError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -125,9 +124,11 @@ def add_tools(tools) -> None:
                    help="[s] steady window at the end of each segment (default 10)")
     m.add_argument("--json", action="store_true", help="print JSON instead of text")
     m.set_defaults(func=cmd_metrics)
-    e = tools.add_parser("export", help="chosen topics as CSV, one file per topic")
+    e = tools.add_parser("export", help="chosen topics as CSV or Parquet, one file per topic")
     e.add_argument("bag", help="bag directory or .mcap file")
-    e.add_argument("--out", required=True, help="directory for the CSV files")
+    e.add_argument("--out", required=True, help="directory for the files")
+    e.add_argument("--format", choices=sorted(FORMATS), default="csv",
+                   help="csv (default) or parquet (needs pyarrow)")
     e.add_argument("--topics", default=None, help="comma-separated topics (default: all)")
     e.set_defaults(func=cmd_export)
     r = tools.add_parser("replay", help="feed the telemetry through observer, estimator and MPC "

@@ -24,7 +24,7 @@ from typing import Sequence
 import numpy as np
 
 from hasel_wheel_sim.params import ParameterError, load_wheel_params, load_yaml_file
-from hasel_wheel_sim.plant import PlantConfig, load_plant_config
+from hasel_wheel_sim.plant import load_plant_config
 from hasel_wheel_sim.trials_support import braking_fall_time, open_loop_speed
 from hasel_wheel_sim.wheel import TICK
 

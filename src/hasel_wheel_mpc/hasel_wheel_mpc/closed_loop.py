@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, NamedTuple
+from typing import Callable
 
 import numpy as np
 
@@ -23,6 +23,7 @@ from hasel_wheel_sim.wheel import TICK
 from .controller import START_ANGLES, ControllerConfig, SpeedController
 from .mpc import MpcConfig
 from .observer import ObserverConfig
+from .segments import SegmentMetrics, SegmentTracker  # noqa: F401  (SegmentMetrics: re-export)
 
 D = math.radians
 
@@ -122,40 +123,23 @@ def run_controller(cfg: ControllerConfig, profile=FIG11_PROFILE,
     return log
 
 
-class SegmentMetrics(NamedTuple):
-    reference: float       # [rad/s]
-    steady_error: float    # |mean(speed) - ref| / ref over the steady window [%]
-    nrmse: float           # RMSE(speed - ref) / ref over the steady window [1]
-    transition: float      # from the step until the speed first reaches ref [s] (rise/fall)
-    settle: float          # from the step until the speed first comes within 2 % of ref [s]
-
-
 def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
                     window: float = 10.0) -> list[SegmentMetrics]:
-    """Per reference segment, on the true speed (see :class:`SegmentMetrics`).
-
-    Steady window: the last ``window`` seconds of the segment.  The transition time is the
-    rise time of a step up and the fall time of a step down, measured as the braking
-    calibration does (from the step until the new reference is first reached); NaN for the
-    first segment (no step).
+    """Per reference segment of ``profile``, on the true speed (see
+    :mod:`~hasel_wheel_mpc.segments`); the last segment ends at ``duration`` [s].  The steady
+    window is the last ``window`` seconds of each segment; the transition time is the rise
+    time of a step up and the fall time of a step down, measured as the braking calibration
+    does (from the step until the new reference is first reached); NaN for the first segment.
     """
-    a = log.arrays()
-    t, v = a["t"], a["true_speed"]
-    out = []
-    bounds = [p[0] for p in profile] + [duration]
-    prev = None
-    for (t0, ref), t1 in zip(profile, bounds[1:]):
-        seg = (t >= t0) & (t < t1)
-        steady = seg & (t >= t1 - window)
-        # relative to the reference: undefined for a stop (ref = 0)
-        ss = abs(np.mean(v[steady]) - ref) / ref * 100.0 if ref else math.nan
-        nrmse = float(np.sqrt(np.mean((v[steady] - ref) ** 2))) / ref if ref else math.nan
-        inside = np.flatnonzero(seg & (np.abs(v - ref) <= 0.02 * ref))
-        settle = float(t[inside[0]] - t0) if inside.size else math.nan
-        trans = math.nan
-        if prev is not None and prev != ref:
-            hit = np.flatnonzero(seg & ((v >= ref) if ref > prev else (v <= ref)))
-            trans = float(t[hit[0]] - t0) if hit.size else math.nan
-        out.append(SegmentMetrics(ref, float(ss), nrmse, trans, settle))
-        prev = ref
-    return out
+    tracker = SegmentTracker(window)
+    refs = iter(profile)
+    nxt = next(refs, None)
+    for t, v in zip(log.t, log.true_speed):
+        while nxt is not None and nxt[0] <= t:
+            tracker.reference(*nxt)
+            nxt = next(refs, None)
+        tracker.sample(t, v)
+    while nxt is not None:
+        tracker.reference(*nxt)
+        nxt = next(refs, None)
+    return tracker.finish(duration)

@@ -157,13 +157,15 @@ def _namespaces(path: str | os.PathLike, warn) -> dict[str, dict[str, list]]:
 def replay_bag(path: str | os.PathLike, overrides: Mapping[str, Any] | None = None,
                namespaces: Iterable[str] | None = None,
                config: ControllerConfig | None = None,
-               warn: Callable[[str], None] | None = None) -> list[ReplayReport]:
+               warn: Callable[[str], None] | None = None,
+               progress: bool = False) -> list[ReplayReport]:
     """Replay every wheel of the bag at ``path`` (or those in ``namespaces``) and compare.
 
     The controller is the one recorded for the namespace (``<ns>/controller.yaml`` in the
     bag's configuration), or ``config`` when given, or the defaults when the bag records
     none (a warning says so); ``overrides`` ({'section.field': value}, see
-    :meth:`ControllerConfig.with_overrides`) change it.  Raises :class:`BagError` when a
+    :meth:`ControllerConfig.with_overrides`) change it.  ``progress``: progress bars on
+    stderr (on a terminal).  Raises :class:`BagError` when a
     wanted namespace has no telemetry or no reference.
     """
     say = warn or (lambda text: None)
@@ -195,12 +197,13 @@ def replay_bag(path: str | os.PathLike, overrides: Mapping[str, Any] | None = No
             say(f"{path}: the bag records no {key}; replaying {ns} with the default controller")
         if overrides:
             cfg = cfg.with_overrides(overrides)
-        reports.append(_replay_one(path, ns, cfg, source, overrides, f, say))
+        reports.append(_replay_one(path, ns, cfg, source, overrides, f, say,
+                                   f"replay {ns}" if progress else None))
     return reports
 
 
 def _replay_one(path, ns: str, cfg: ControllerConfig, source: str, overrides: dict,
-                f: dict[str, list], say) -> ReplayReport:
+                f: dict[str, list], say, progress: str | None) -> ReplayReport:
     statuses = f["status"]
     clock = PlaybackClock(float(m.compute_time) for _, m in statuses)
     ctrl = SpeedController(cfg, clock)
@@ -211,7 +214,8 @@ def _replay_one(path, ns: str, cfg: ControllerConfig, source: str, overrides: di
     pending_est: dict[int, tuple[dict, float]] = {}        # recomputed, waiting for the recorded
     recorded_est: dict[int, Any] = {}                      # recorded, waiting for the recomputed
     tel, est = ns + SUFFIX_TELEMETRY, ns + SUFFIX_ESTIMATE
-    for topic, t_ns, m in read_messages(path, topics=[tel, est], warn=say):
+    for topic, t_ns, m in read_messages(path, topics=[tel, est], warn=say,
+                                          progress=progress):
         if topic == tel:
             while k_ref < len(refs) and refs[k_ref][0] <= t_ns:
                 ref = refs[k_ref][1]

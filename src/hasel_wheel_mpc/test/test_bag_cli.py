@@ -1,6 +1,8 @@
-"""``hasel_wheel bag info`` from the command line."""
+"""``hasel_wheel bag info`` and ``export`` from the command line."""
+import pytest
+
 from hasel_wheel_driver import topics
-from hasel_wheel_driver.bagio import BagWriter
+from hasel_wheel_driver.bagio import BagError, BagWriter
 from hasel_wheel_mpc.cli import main
 
 
@@ -45,3 +47,40 @@ def test_export_writes_one_csv_per_topic_with_flat_columns(tmp_path, capsys):
     assert [float(r["position[0]"]) for r in rows] == [0.1 * k for k in range(5)]
     assert math.isclose(float(rows[3]["t"]), 3 / 300, abs_tol=1e-9)
     assert not (tmp_path / "csv" / "w0__reference_speed.csv").exists()
+
+
+def test_export_parquet_round_trips_in_row_groups(tmp_path, capsys, monkeypatch):
+    """Telemetry to Parquet in batches of 7 rows (so several row groups): every value and
+    type comes back as written."""
+    import pyarrow.parquet as pq
+
+    from hasel_wheel_driver import bagexport, samples
+
+    monkeypatch.setattr(bagexport._ParquetSink, "BATCH", 7)
+    bag = tmp_path / "p"
+    n = 30
+    with BagWriter(bag) as b:
+        b.add_topic("/w0/telemetry", topics.TELEMETRY.type, topics.TELEMETRY.qos)
+        for k in range(n):
+            t = k / 300
+            s = samples.TelemetrySample(t, round(t * 1e6), k, k % 1024, 0.01 * k, k % 2, k % 16,
+                                        k, 1 << (k % 16), 9000.0, 3e-4, k // 3, 0)
+            b.write("/w0/telemetry", samples.telemetry_msg(s), round(t * 1e9))
+    assert main(["bag", "export", str(bag), "--out", str(tmp_path / "pq"),
+                 "--format", "parquet"]) == 0
+    assert "/w0/telemetry: 30 rows" in capsys.readouterr().out
+    f = pq.ParquetFile(tmp_path / "pq" / "w0__telemetry.parquet")
+    assert f.metadata.num_row_groups == 5                  # 7 + 7 + 7 + 7 + 2
+    table = f.read()
+    assert table.num_rows == n
+    assert table.column("sequence").to_pylist() == list(range(n))
+    assert table.column("angle").to_pylist() == [0.01 * k for k in range(n)]
+    assert table.column("t").to_pylist() == [round(k / 300 * 1e9) / 1e9 for k in range(n)]
+    assert str(table.schema.field("hv_monitor").type) == "double"
+    assert table.column("header.frame_id").to_pylist() == ["wheel"] * n
+
+
+def test_export_refuses_an_unknown_format(tmp_path):
+    from hasel_wheel_driver.bagexport import export
+    with pytest.raises(BagError, match="export format 'xlsx': expected one of"):
+        export(tmp_path, tmp_path / "o", fmt="xlsx")

@@ -117,3 +117,67 @@ def test_a_stop_segment_has_no_relative_error_instead_of_a_crash(tmp_path):
                     round(k / RATE * 1e9))
     (w,) = bag_metrics(path)
     assert math.isnan(w.segments[0].steady_error) and math.isnan(w.segments[0].nrmse)
+
+
+def test_link_errors_come_from_the_telemetry_counter_and_flags(tmp_path):
+    """300 samples with the counter skipping 3 and then 1, one device restart, and 5 samples
+    flagged (watchdog, then encoder): the counts follow by hand."""
+    path = tmp_path / "link"
+    tel, ref, st = topics.TELEMETRY, topics.REFERENCE, topics.TRUE_STATE
+    seqs = list(range(100)) + list(range(103, 200)) + list(range(201, 250)) + list(range(0, 50))
+    with BagWriter(path) as b:
+        for tp in (tel, ref, st):
+            b.add_topic(topics.qualified(tp, "/w5"), tp.type, tp.qos)
+        b.write("/w5/reference_speed", {"data": 1.0}, 0)
+        for k, seq in enumerate(seqs):
+            t = k / RATE
+            flags = 1 if k in (10, 11, 12) else (16 if k in (200, 201) else 0)
+            s = samples.TelemetrySample(t, round(t * 1e6), seq, 0, 0.0, 0, 0, 0, 0, 0.0, 0.0, 0,
+                                        flags)
+            b.write("/w5/telemetry", samples.telemetry_msg(s), round(t * 1e9))
+            b.write("/w5/sim/true_state", samples.state_msg(t, 0.0, 1.0, 0, 0.0, 0.0, 0),
+                    round(t * 1e9))
+    (w,) = bag_metrics(path)
+    assert w.telemetry_samples == len(seqs)
+    assert (w.lost_samples, w.device_restarts) == (3 + 1, 1)
+    assert (w.fault_samples, w.fault_flags) == (5, 1 | 16)
+    assert "4 lost (sequence gaps), 1 device restarts, 5 with fault flags (bits 0x11)" in w.text()
+
+
+def test_steady_windows_are_the_last_window_seconds_of_each_segment(bag):
+    w1, _ = bag_metrics(bag, window=5.0)
+    end = 60.0 - 1 / RATE + 1 / RATE                     # one interval past the last sample
+    assert w1.steady_windows == [(15.0, 20.0), (35.0, 40.0), (pytest.approx(end - 5.0),
+                                                           pytest.approx(end))]
+
+
+def test_a_sample_at_the_step_belongs_to_the_new_segment_in_either_order():
+    from hasel_wheel_mpc.segments import SegmentTracker
+    results = []
+    for sample_first in (True, False):
+        tr = SegmentTracker(window=1.0)
+        tr.reference(0.0, 1.0)
+        tr.sample(0.5, 1.0)
+        if sample_first:
+            tr.sample(1.0, 2.0)
+            tr.reference(1.0, 2.0)
+        else:
+            tr.reference(1.0, 2.0)
+            tr.sample(1.0, 2.0)
+        tr.sample(1.5, 2.0)
+        results.append(tr.finish(2.0))
+    first, second = results
+    assert first == second
+    assert first[0].steady_error == 0.0 and first[1].steady_error == 0.0
+    assert first[1].transition == 0.0                     # reached at the step itself
+
+
+def test_the_tracker_keeps_only_the_steady_window_in_memory():
+    from hasel_wheel_mpc.segments import SegmentTracker
+    tr = SegmentTracker(window=2.0)
+    tr.reference(0.0, 1.0)
+    for k in range(100_000):                              # 333 s at 300 Hz
+        tr.sample(k / RATE, 1.0 + 0.01 * (k % 2))
+        assert len(tr._ring) <= 2.0 * RATE + 2
+    (seg,) = tr.finish()
+    assert seg.steady_error == pytest.approx(0.5, rel=1e-3)      # mean 1.005 over the window
