@@ -5,6 +5,7 @@
     hasel_wheel bag metrics out/demo/bag           # per wheel and reference segment
     hasel_wheel bag export out/demo/bag --out csv/ --topics /wheel0/telemetry   # CSV per topic
     hasel_wheel bag export out/demo/bag --out pq/ --format parquet              # Parquet
+    hasel_wheel bag plot out/demo/bag --out plots/ # speed, raster, force, observer (PNG)
     hasel_wheel bag replay out/demo/bag            # re-run observer + MPC, compare (exact)
     hasel_wheel bag replay out/demo/bag --set mpc.brake_threshold=0.2   # what would change
 
@@ -88,6 +89,19 @@ def _override(text: str) -> tuple[str, object]:
     return key.strip(), yaml.safe_load(value)
 
 
+def cmd_plot(args: argparse.Namespace) -> int:
+    """Write the PNG figures of every wheel in a bag."""
+    from .bag_plot import plot_bag
+    try:
+        files = plot_bag(args.bag, args.out, args.namespace, progress=True)
+    except BagError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for f in files:
+        print(f)
+    return 0
+
+
 def cmd_replay(args: argparse.Namespace) -> int:
     """Replay a bag's telemetry through the controller; print what differs."""
     from hasel_wheel_sim.params import ParameterError
@@ -106,13 +120,13 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add ``bag`` (``info``, ``metrics``, ``export``, ``replay``) to the ``hasel_wheel`` sub-command parser."""
-    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, export, replay)")
+    """Add ``bag`` (``info``, ``metrics``, ``plot``, ``export``, ``replay``) to the ``hasel_wheel`` sub-command parser."""
+    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, plot, export, replay)")
     add_tools(b.add_subparsers(dest="bag_command", required=True))
 
 
 def add_tools(tools) -> None:
-    """Add the tools (``info``, ``metrics``, ``export``, ``replay``) to a sub-command parser."""
+    """Add the tools (``info``, ``metrics``, ``plot``, ``export``, ``replay``) to a sub-command parser."""
     i = tools.add_parser("info", help="topics, counts, rates, gaps, duration, configuration")
     i.add_argument("bag", help="bag directory or .mcap file")
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -131,6 +145,14 @@ def add_tools(tools) -> None:
                    help="csv (default) or parquet (needs pyarrow)")
     e.add_argument("--topics", default=None, help="comma-separated topics (default: all)")
     e.set_defaults(func=cmd_export)
+    p = tools.add_parser("plot", help="PNG figures per wheel: speed vs reference (Fig. 11), "
+                                      "actuator raster, force vs contact angle, observer vs "
+                                      "raw encoder")
+    p.add_argument("bag", help="bag directory or .mcap file")
+    p.add_argument("--out", required=True, help="directory for the PNG files")
+    p.add_argument("--namespace", action="append", default=None,
+                   help="wheel namespace, e.g. /wheel0 (repeatable; default: all)")
+    p.set_defaults(func=cmd_plot)
     r = tools.add_parser("replay", help="feed the telemetry through observer, estimator and MPC "
                                         "again; compare with the recorded estimates and decisions")
     r.add_argument("bag", help="bag directory or .mcap file")
