@@ -5,9 +5,12 @@ namespaced launch would publish them, so one bag holds several runs side by side
 """
 from __future__ import annotations
 
+import hashlib
 import subprocess
 from pathlib import Path
-from typing import Mapping
+from typing import Iterable, Mapping
+
+import yaml
 
 from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.bagio import BagWriter
@@ -25,6 +28,34 @@ def git_revision(cwd: str | Path | None = None) -> str:
         return rev + ("-dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+
+
+def launch_custom_data(files: Iterable[str], extra: Mapping[str, str] | None = None
+                       ) -> dict[str, str]:
+    """custom_data for ``ros2 bag record --custom-data KEY=VALUE ...`` from a launch file: the
+    git revision (of the working directory), ``extra``, and every file in ``files`` under
+    ``file:<name>``.  Jazzy's recorder cuts each pair at every '=' (keeping the first two
+    pieces), so a file goes in as its text when that has no '='; else as its YAML data
+    re-written without comments (the same parameters) when that has none; else as its path
+    and sha256.  An '=' in the keys or values of ``extra`` is refused."""
+    out = {"git_revision": git_revision()}
+    for key, value in (extra or {}).items():
+        if "=" in key or "=" in value:
+            raise ValueError(f"custom data {key!r}: keys and values must not contain '=' "
+                             f"(ros2 bag record splits KEY=VALUE at every '=')")
+        out[key] = value
+    for f in files:
+        p = Path(f)
+        text = p.read_text(encoding="utf-8")
+        if "=" in text:
+            try:
+                text = "# comments dropped\n" + yaml.safe_dump(yaml.safe_load(text),
+                                                               sort_keys=False)
+            except yaml.YAMLError:
+                pass
+        out[f"file:{p.name}"] = (text if "=" not in text else
+                                 f"{p.resolve()} sha256 {hashlib.sha256(p.read_bytes()).hexdigest()}")
+    return out
 
 
 class Recorder:

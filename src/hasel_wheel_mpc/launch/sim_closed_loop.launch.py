@@ -2,6 +2,7 @@
 
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py [namespace:=wheel0] [time_scale:=1.0]
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py controller_model_file:=out/identify/model.yaml
+    ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py bag_dir:=bags/run1   # or record:=false
     ros2 topic pub --once reference_speed std_msgs/msg/Float64 "{data: 1.5}"
     ros2 param set /mpc_node reference_speed 2.0
 
@@ -10,37 +11,19 @@ plant with realistic effects unless plant_file:=... says otherwise) starts once 
 logged "ready:".  The simulated wheel starts at 1 rad/s and coasts to a stop within about 2 s
 without commands, and a stopped wheel cannot be started; loading (or on the first run,
 compiling) the model takes the nodes longer than that on a small machine.
+
+Every topic is recorded to an MCAP bag (record.launch.py) with the parameter files, the plant
+file (its seed) and the controller's model file in the bag's custom data.
 """
 from launch import LaunchDescription
-from launch.actions import (DeclareLaunchArgument, IncludeLaunchDescription,
-                            RegisterEventHandler, Shutdown)
-from launch.event_handlers import OnProcessIO
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, Shutdown
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
-READY = b"ready:"
-
-
-def _when_all_ready(nodes, actions):
-    """Event handlers that return ``actions`` once every node in ``nodes`` has logged READY."""
-    waiting = set(range(len(nodes)))
-
-    def handler(i):
-        def on_output(event):
-            if i in waiting and READY in event.text:
-                waiting.discard(i)
-                if not waiting:
-                    return actions
-            return None
-        return on_output
-
-    return [RegisterEventHandler(OnProcessIO(target_action=n, on_stdout=handler(i),
-                                             on_stderr=handler(i)))
-            for i, n in enumerate(nodes)]
-
+from hasel_wheel_mpc.launch_support import when_all_ready
 
 def generate_launch_description():
     share = FindPackageShare("hasel_wheel_mpc")
@@ -62,7 +45,21 @@ def generate_launch_description():
                           "plant_file": LaunchConfiguration("plant_file"),
                           "time_scale": LaunchConfiguration("time_scale"),
                           "model_file": LaunchConfiguration("plant_model_file")}.items())
+    files = []                  # "a,b,c,d" as substitutions; '' entries are skipped
+    for name in ("observer_params_file", "mpc_params_file", "plant_file",
+                 "controller_model_file"):
+        files += [LaunchConfiguration(name), ","]
+    record = IncludeLaunchDescription(
+        PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "record.launch.py"])),
+        launch_arguments={"record": LaunchConfiguration("record"),
+                          "bag_dir": LaunchConfiguration("bag_dir"),
+                          "config_files": files}.items())
     return LaunchDescription([
+        DeclareLaunchArgument("record", default_value="true",
+                              description="record every topic to an MCAP bag (true/false)"),
+        DeclareLaunchArgument("bag_dir", default_value="",
+                              description="output directory of the bag ('' = rosbag2's "
+                                          "rosbag2_<date>_<time>)"),
         DeclareLaunchArgument("namespace", default_value="",
                               description="namespace of the wheel's topics and nodes ('' = root)"),
         DeclareLaunchArgument("plant_file",
@@ -85,7 +82,8 @@ def generate_launch_description():
         DeclareLaunchArgument("mpc_params_file",
                               default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
                               description="ROS parameter file of mpc_node"),
-        *_when_all_ready([observer, mpc], [sim]),
+        *when_all_ready([observer, mpc], [sim]),
+        record,
         observer,
         mpc,
     ])

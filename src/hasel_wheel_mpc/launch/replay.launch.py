@@ -1,0 +1,69 @@
+"""A recorded bag drives the observer and the MPC live: ros2 bag play into the nodes.
+
+    ros2 launch hasel_wheel_mpc replay.launch.py bag:=out/demo/bag namespace:=wheel0
+    ros2 launch hasel_wheel_mpc replay.launch.py bag:=out/demo/bag rate:=2.0 bag_dir:=bags/replay1
+
+``<namespace>/telemetry``, ``reference_speed`` and ``command`` are played: the observer must
+know the angles of the commands the wheel really ran (the telemetry names them by sequence
+number).  The nodes compute their own ``state_estimate`` and ``mpc_status``; the MPC's new
+commands go to ``<namespace>/replay/command`` (remapped, so they neither reach the observer
+nor mix with the recorded ones).  Everything is recorded to a new bag (record.launch.py;
+record:=false turns it off).  Nothing drives a wheel: no driver or simulator runs, and the
+recorded motion is the one the original controller caused (an open-loop replay).  Playback starts once both
+nodes have logged "ready:"; the launch ends when the bag has been played.
+
+The nodes see the samples in real time, with the MPC's wall-clock deadline, so their output
+is close to but not bit-identical with the recording; the exact re-computation is offline:
+``hasel_wheel bag replay <bag>``.
+"""
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, IncludeLaunchDescription, Shutdown
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.substitutions import FindPackageShare
+
+from hasel_wheel_mpc.launch_support import when_all_ready
+
+def generate_launch_description():
+    share = FindPackageShare("hasel_wheel_mpc")
+    ns = LaunchConfiguration("namespace")
+    observer = Node(package="hasel_wheel_mpc", executable="observer_node", name="observer_node",
+                    namespace=ns, output="screen",
+                    parameters=[LaunchConfiguration("observer_params_file")])
+    mpc = Node(package="hasel_wheel_mpc", executable="mpc_node", name="mpc_node",
+               namespace=ns, output="screen", parameters=[LaunchConfiguration("mpc_params_file")],
+               remappings=[("command", "replay/command")])
+    play = ExecuteProcess(
+        cmd=["ros2", "bag", "play", LaunchConfiguration("bag"), "--rate",
+             LaunchConfiguration("rate"), "--disable-keyboard-controls", "--topics",
+             ["/", ns, "/telemetry"], ["/", ns, "/reference_speed"], ["/", ns, "/command"]],
+        output="screen", name="bag_play", on_exit=Shutdown(reason="the bag has been played"))
+    record = IncludeLaunchDescription(
+        PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "record.launch.py"])),
+        launch_arguments={"record": LaunchConfiguration("record"),
+                          "bag_dir": LaunchConfiguration("bag_dir"),
+                          "config_files": [LaunchConfiguration("observer_params_file"), ",",
+                                           LaunchConfiguration("mpc_params_file")]}.items())
+    return LaunchDescription([
+        DeclareLaunchArgument("bag", description="bag to play (directory or .mcap file)"),
+        DeclareLaunchArgument("namespace", default_value="wheel0",
+                              description="the wheel's namespace in the bag (no leading '/')"),
+        DeclareLaunchArgument("rate", default_value="1.0", description="playback rate [1]"),
+        DeclareLaunchArgument("record", default_value="true",
+                              description="record the replay to a new MCAP bag (true/false)"),
+        DeclareLaunchArgument("bag_dir", default_value="",
+                              description="output directory of the new bag ('' = rosbag2's "
+                                          "rosbag2_<date>_<time>)"),
+        DeclareLaunchArgument("observer_params_file",
+                              default_value=PathJoinSubstitution([share, "config",
+                                                                  "observer.yaml"]),
+                              description="ROS parameter file of observer_node"),
+        DeclareLaunchArgument("mpc_params_file",
+                              default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
+                              description="ROS parameter file of mpc_node"),
+        *when_all_ready([observer, mpc], [play]),
+        record,
+        observer,
+        mpc,
+    ])
