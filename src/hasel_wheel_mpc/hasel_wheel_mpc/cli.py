@@ -94,6 +94,9 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.hold_scale <= 0.0:
         print(f"error: --hold-scale {args.hold_scale}: expected a positive factor", file=sys.stderr)
         return 2
+    if args.wheels < 1:
+        print(f"error: --wheels {args.wheels}: expected at least 1", file=sys.stderr)
+        return 2
     out = Path(args.out)
     bag_dir = _fresh_bag_dir(out)
     if bag_dir is None:
@@ -101,11 +104,12 @@ def cmd_demo(args: argparse.Namespace) -> int:
     rec = Recorder(bag_dir, custom_data={"tool": "hasel_wheel demo", "git_revision": git_revision(),
                                          "seed": str(plant_cfg.seed),
                                          "plant.yaml": Path(args.plant).read_text(),
-                                         "hold_scale": repr(args.hold_scale)})
+                                         "hold_scale": repr(args.hold_scale),
+                                         "wheels": str(args.wheels)})
     variants = VARIANTS if args.compare else VARIANTS[:1]
     t0 = time.perf_counter()
     try:
-        results = run_variants(plant_cfg, args.hold_scale, variants, rec)
+        results = run_variants(plant_cfg, args.hold_scale, variants, rec, args.wheels)
     finally:
         rec.close()
     wall = time.perf_counter() - t0
@@ -239,6 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant_realistic.yaml")))
     c.add_argument("--hold-scale", type=float, default=1.0,
                    help="stretch every hold of the profile by this factor (default 1: 40 s holds)")
+    c.add_argument("--wheels", type=int, default=1,
+                   help="wheels run in lockstep, wheel i on the plant seed + i, each recorded "
+                        "under /wheel<i> (default 1)")
     c.add_argument("--no-compare", dest="compare", action="store_false",
                    help="skip the comparison runs (no estimator, paper estimator, finite difference)")
     c.set_defaults(func=cmd_demo)

@@ -78,10 +78,21 @@ def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
     machine's speed).
     """
     params = params or WheelParams()
-    cfg = ControllerConfig(controller_params or params, controller_extensions or Extensions(),
-                           observer_config or ObserverConfig(), mpc_config or MpcConfig(),
-                           estimator_gain, estimator_mode, speed_source=speed_source)
+    cfg = controller_config(estimator_gain, speed_source, mpc_config, estimator_mode,
+                            observer_config, controller_params or params, controller_extensions)
     return run_controller(cfg, profile, duration, plant_config, params, w0, recorder, ns, clock)
+
+
+def controller_config(estimator_gain: float | None = 0.1, speed_source: str = "observer",
+                      mpc_config: MpcConfig | None = None, estimator_mode: str = "tracking",
+                      observer_config: ObserverConfig | None = None,
+                      controller_params: WheelParams | None = None,
+                      controller_extensions: Extensions | None = None) -> ControllerConfig:
+    """The :class:`ControllerConfig` that :func:`run_closed_loop`'s keyword arguments mean."""
+    return ControllerConfig(controller_params or WheelParams(),
+                            controller_extensions or Extensions(),
+                            observer_config or ObserverConfig(), mpc_config or MpcConfig(),
+                            estimator_gain, estimator_mode, speed_source=speed_source)
 
 
 def run_controller(cfg: ControllerConfig, profile=FIG11_PROFILE,
@@ -89,38 +100,64 @@ def run_controller(cfg: ControllerConfig, profile=FIG11_PROFILE,
                    params: WheelParams | None = None, w0: float = 1.0, recorder=None,
                    ns: str = "/wheel0", clock: Callable[[], float] | None = None) -> LoopLog:
     """:func:`run_closed_loop` with the controller given as a :class:`ControllerConfig`."""
-    plant = Plant(params or WheelParams(), plant_config or PlantConfig(switching="tick"), xi2=w0)
-    ctrl = SpeedController(cfg, clock)
-    if recorder is not None:
-        recorder.configuration({f"{ns}/controller.yaml": cfg.to_yaml()})
-    log = LoopLog()
-    pending: Command | None = Command(1, *START_ANGLES, 0)       # start the wheel
-    last_ref = None
+    return run_wheels([WheelLoop(cfg, profile, plant_config, params, w0, recorder, ns, clock)],
+                      duration)[0]
+
+
+def run_wheels(wheels: list["WheelLoop"], duration: float) -> list[LoopLog]:
+    """Step several wheels in lockstep for ``duration`` [s] (one tick each, in turn), so a
+    shared recorder writes their messages in time order; returns each wheel's log."""
     for _ in range(int(duration / TICK)):
-        s = plant.step(pending)
-        pending = None
-        if s is None:
-            continue
-        ref = reference_at(profile, s.t)
-        r = ctrl.step(samples.as_received(s), ref)
+        for w in wheels:
+            w.step()
+    return [w.log for w in wheels]
+
+
+class WheelLoop:
+    """One wheel's closed loop (plant, controller, recording), advanced one tick per
+    :meth:`step`.  Arguments as :func:`run_controller`'s."""
+
+    def __init__(self, cfg: ControllerConfig, profile=FIG11_PROFILE,
+                 plant_config: PlantConfig | None = None, params: WheelParams | None = None,
+                 w0: float = 1.0, recorder=None, ns: str = "/wheel0",
+                 clock: Callable[[], float] | None = None) -> None:
+        self.profile = profile
+        self.plant = Plant(params or WheelParams(), plant_config or PlantConfig(switching="tick"),
+                           xi2=w0)
+        self.ctrl = SpeedController(cfg, clock)
+        self.recorder, self.ns = recorder, ns
         if recorder is not None:
-            recorder.telemetry(ns, s)
-            recorder.true_state(ns, plant.t, plant.wheel.state)
-            recorder.estimate(ns, r.estimate, r.d_before)
-            if ref != last_ref:
-                recorder.reference(ns, s.t, ref)
-        last_ref = ref
+            recorder.configuration({f"{ns}/controller.yaml": cfg.to_yaml()})
+        self.log = LoopLog()
+        self._pending: Command | None = Command(1, *START_ANGLES, 0)       # start the wheel
+        self._last_ref = None
+
+    def step(self) -> None:
+        """One 300 Hz tick: plant, then (if a sample came) controller and recording."""
+        s = self.plant.step(self._pending)
+        self._pending = None
+        if s is None:
+            return
+        ref = reference_at(self.profile, s.t)
+        r = self.ctrl.step(samples.as_received(s), ref)
+        rec, ns, log = self.recorder, self.ns, self.log
+        if rec is not None:
+            rec.telemetry(ns, s)
+            rec.true_state(ns, self.plant.t, self.plant.wheel.state)
+            rec.estimate(ns, r.estimate, r.d_before)
+            if ref != self._last_ref:
+                rec.reference(ns, s.t, ref)
+        self._last_ref = ref
         log.t.append(s.t)
-        log.true_speed.append(plant.wheel.s[2])
+        log.true_speed.append(self.plant.wheel.s[2])
         log.est_speed.append(r.speed)
         log.reference.append(ref)
         log.d.append(r.d_before)
         if r.decision is not None:
-            pending = r.decision.command
+            self._pending = r.decision.command
             log.decisions.append((s.t, r.decision))
-            if recorder is not None:
-                recorder.decision(ns, s.t, r.decision, ref)
-    return log
+            if rec is not None:
+                rec.decision(ns, s.t, r.decision, ref)
 
 
 def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11_DURATION,

@@ -7,6 +7,7 @@ metrics per reference next to the paper's and writes PNG plots like Fig. 11(a-c)
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 from typing import NamedTuple
@@ -14,7 +15,8 @@ from typing import NamedTuple
 import numpy as np
 
 from . import paper
-from .closed_loop import FIG11_DURATION, FIG11_PROFILE, LoopLog, run_closed_loop, segment_metrics
+from .closed_loop import (FIG11_DURATION, FIG11_PROFILE, LoopLog, WheelLoop, controller_config,
+                          run_closed_loop, run_wheels, segment_metrics)
 
 #: (label, keyword arguments of run_closed_loop) of the comparison runs.
 VARIANTS = (
@@ -36,15 +38,32 @@ def scaled_profile(scale: float):
     return tuple((t * scale, r) for t, r in FIG11_PROFILE), FIG11_DURATION * scale
 
 
-def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=None):
-    """Run each variant on the scaled profile; the first is recorded (if ``recorder``)."""
+def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=None,
+                 wheels: int = 1):
+    """Run each variant on the scaled profile; the first is recorded (if ``recorder``).
+
+    With ``wheels`` > 1 the first variant runs that many wheels in lockstep, wheel i on the
+    plant with seed ``plant_config.seed + i``, each recorded under ``/wheel<i>``; the
+    results (one per variant) are wheel 0's, and the other wheels' results follow them as
+    ``"<label>, /wheel<i>"``.
+    """
     profile, duration = scaled_profile(scale)
-    out = []
+    out, extra = [], []
     for i, (label, kw) in enumerate(variants):
-        log = run_closed_loop(profile, duration, plant_config=plant_config,
-                              recorder=recorder if i == 0 else None, **kw)
+        if i == 0:
+            cfg = controller_config(**kw)
+            loops = [WheelLoop(cfg, profile, dataclasses.replace(plant_config,
+                                                                 seed=plant_config.seed + k),
+                               recorder=recorder, ns=f"/wheel{k}")
+                     for k in range(wheels)]
+            logs = run_wheels(loops, duration)
+            log = logs[0]
+            extra = [VariantResult(f"{label}, /wheel{k}", lg, segment_metrics(lg, profile, duration))
+                     for k, lg in enumerate(logs[1:], start=1)]
+        else:
+            log = run_closed_loop(profile, duration, plant_config=plant_config, **kw)
         out.append(VariantResult(label, log, segment_metrics(log, profile, duration)))
-    return out
+    return out + extra
 
 
 def _f(v, spec):

@@ -2,8 +2,11 @@
 """
 from __future__ import annotations
 
-from launch.actions import RegisterEventHandler
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, RegisterEventHandler
 from launch.event_handlers import OnProcessIO
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.substitutions import FindPackageShare
 
 #: What a node logs once it can take samples (its model is loaded or compiled).
 READY = b"ready:"
@@ -26,3 +29,38 @@ def when_all_ready(nodes, actions) -> list:
     return [RegisterEventHandler(OnProcessIO(target_action=n, on_stdout=handler(i),
                                              on_stderr=handler(i)))
             for i, n in enumerate(nodes)]
+
+
+def recording_arguments() -> list:
+    """The ``record`` and ``bag_dir`` launch arguments (record.launch.py's)."""
+    return [DeclareLaunchArgument("record", default_value="true",
+                                  description="record every topic to an MCAP bag (true/false)"),
+            DeclareLaunchArgument("bag_dir", default_value="",
+                                  description="output directory of the bag ('' = rosbag2's "
+                                              "rosbag2_<date>_<time>)")]
+
+
+def include_recording(config_files: list[str]) -> IncludeLaunchDescription:
+    """record.launch.py with this launch's ``record`` and ``bag_dir``, keeping the files named
+    by the launch arguments ``config_files`` in the bag (an empty one is left out)."""
+    files: list = []                  # "a,b,c" as substitutions
+    for name in config_files:
+        files += [LaunchConfiguration(name), ","]
+    share = FindPackageShare("hasel_wheel_mpc")
+    return IncludeLaunchDescription(
+        PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "record.launch.py"])),
+        launch_arguments={"record": LaunchConfiguration("record"),
+                          "bag_dir": LaunchConfiguration("bag_dir"),
+                          "config_files": files}.items())
+
+
+def controller_parameter_arguments() -> list:
+    """The ``observer_params_file`` and ``mpc_params_file`` launch arguments."""
+    share = FindPackageShare("hasel_wheel_mpc")
+    return [DeclareLaunchArgument("observer_params_file",
+                                  default_value=PathJoinSubstitution([share, "config",
+                                                                      "observer.yaml"]),
+                                  description="ROS parameter file of observer_node"),
+            DeclareLaunchArgument("mpc_params_file",
+                                  default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
+                                  description="ROS parameter file of mpc_node")]

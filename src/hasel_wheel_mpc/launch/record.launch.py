@@ -14,6 +14,7 @@ from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 
+from hasel_wheel_mpc.launch_support import recording_arguments
 from hasel_wheel_mpc.recorder import launch_custom_data
 
 
@@ -32,11 +33,7 @@ def _recorder(context):
 
 def generate_launch_description():
     return LaunchDescription([
-        DeclareLaunchArgument("record", default_value="true",
-                              description="record every topic to an MCAP bag (true/false)"),
-        DeclareLaunchArgument("bag_dir", default_value="",
-                              description="output directory of the bag ('' = rosbag2's "
-                                          "rosbag2_<date>_<time>)"),
+        *recording_arguments(),
         DeclareLaunchArgument("config_files", default_value="",
                               description="comma-separated files to keep in the bag's "
                                           "custom data"),

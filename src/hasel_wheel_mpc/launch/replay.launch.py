@@ -17,16 +17,14 @@ is close to but not bit-identical with the recording; the exact re-computation i
 ``hasel_wheel bag replay <bag>``.
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, IncludeLaunchDescription, Shutdown
-from launch.launch_description_sources import PythonLaunchDescriptionSource
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, Shutdown
+from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
-from launch_ros.substitutions import FindPackageShare
 
-from hasel_wheel_mpc.launch_support import when_all_ready
+from hasel_wheel_mpc.launch_support import (controller_parameter_arguments, include_recording,
+                                           recording_arguments, when_all_ready)
 
 def generate_launch_description():
-    share = FindPackageShare("hasel_wheel_mpc")
     ns = LaunchConfiguration("namespace")
     observer = Node(package="hasel_wheel_mpc", executable="observer_node", name="observer_node",
                     namespace=ns, output="screen",
@@ -39,29 +37,14 @@ def generate_launch_description():
              LaunchConfiguration("rate"), "--disable-keyboard-controls", "--topics",
              ["/", ns, "/telemetry"], ["/", ns, "/reference_speed"], ["/", ns, "/command"]],
         output="screen", name="bag_play", on_exit=Shutdown(reason="the bag has been played"))
-    record = IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "record.launch.py"])),
-        launch_arguments={"record": LaunchConfiguration("record"),
-                          "bag_dir": LaunchConfiguration("bag_dir"),
-                          "config_files": [LaunchConfiguration("observer_params_file"), ",",
-                                           LaunchConfiguration("mpc_params_file")]}.items())
+    record = include_recording(["observer_params_file", "mpc_params_file"])
     return LaunchDescription([
         DeclareLaunchArgument("bag", description="bag to play (directory or .mcap file)"),
         DeclareLaunchArgument("namespace", default_value="wheel0",
                               description="the wheel's namespace in the bag (no leading '/')"),
         DeclareLaunchArgument("rate", default_value="1.0", description="playback rate [1]"),
-        DeclareLaunchArgument("record", default_value="true",
-                              description="record the replay to a new MCAP bag (true/false)"),
-        DeclareLaunchArgument("bag_dir", default_value="",
-                              description="output directory of the new bag ('' = rosbag2's "
-                                          "rosbag2_<date>_<time>)"),
-        DeclareLaunchArgument("observer_params_file",
-                              default_value=PathJoinSubstitution([share, "config",
-                                                                  "observer.yaml"]),
-                              description="ROS parameter file of observer_node"),
-        DeclareLaunchArgument("mpc_params_file",
-                              default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
-                              description="ROS parameter file of mpc_node"),
+        *recording_arguments(),
+        *controller_parameter_arguments(),
         *when_all_ready([observer, mpc], [play]),
         record,
         observer,

@@ -23,10 +23,10 @@ from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
-from hasel_wheel_mpc.launch_support import when_all_ready
+from hasel_wheel_mpc.launch_support import (controller_parameter_arguments, include_recording,
+                                           recording_arguments, when_all_ready)
 
 def generate_launch_description():
-    share = FindPackageShare("hasel_wheel_mpc")
     sim_share = FindPackageShare("hasel_wheel_sim")
     namespace = LaunchConfiguration("namespace")
     controller_model = {"model_file": ParameterValue(LaunchConfiguration("controller_model_file"),
@@ -45,21 +45,10 @@ def generate_launch_description():
                           "plant_file": LaunchConfiguration("plant_file"),
                           "time_scale": LaunchConfiguration("time_scale"),
                           "model_file": LaunchConfiguration("plant_model_file")}.items())
-    files = []                  # "a,b,c,d" as substitutions; '' entries are skipped
-    for name in ("observer_params_file", "mpc_params_file", "plant_file",
-                 "controller_model_file"):
-        files += [LaunchConfiguration(name), ","]
-    record = IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "record.launch.py"])),
-        launch_arguments={"record": LaunchConfiguration("record"),
-                          "bag_dir": LaunchConfiguration("bag_dir"),
-                          "config_files": files}.items())
+    record = include_recording(["observer_params_file", "mpc_params_file", "plant_file",
+                                "controller_model_file"])
     return LaunchDescription([
-        DeclareLaunchArgument("record", default_value="true",
-                              description="record every topic to an MCAP bag (true/false)"),
-        DeclareLaunchArgument("bag_dir", default_value="",
-                              description="output directory of the bag ('' = rosbag2's "
-                                          "rosbag2_<date>_<time>)"),
+        *recording_arguments(),
         DeclareLaunchArgument("namespace", default_value="",
                               description="namespace of the wheel's topics and nodes ('' = root)"),
         DeclareLaunchArgument("plant_file",
@@ -75,13 +64,7 @@ def generate_launch_description():
                               description="model file as the simulated plant's dynamics (then "
                                           "pass plant_file:=.../plant.yaml: sensor/link "
                                           "effects only); '' = plant_file's effects"),
-        DeclareLaunchArgument("observer_params_file",
-                              default_value=PathJoinSubstitution([share, "config",
-                                                                  "observer.yaml"]),
-                              description="ROS parameter file of observer_node"),
-        DeclareLaunchArgument("mpc_params_file",
-                              default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
-                              description="ROS parameter file of mpc_node"),
+        *controller_parameter_arguments(),
         *when_all_ready([observer, mpc], [sim]),
         record,
         observer,
