@@ -201,15 +201,39 @@ class BagWriter:
         self.close()
 
 
+def bag_metadata(path: str | os.PathLike) -> dict[str, Any] | None:
+    """The ``rosbag2_bagfile_information`` mapping of a bag directory's metadata.yaml, or
+    None when there is none (a lone .mcap file, or a killed recording).  A metadata.yaml that
+    is not rosbag2 metadata raises :class:`BagError` naming it."""
+    meta = Path(path) / "metadata.yaml"
+    if not meta.is_file():
+        return None
+    try:
+        data = yaml.safe_load(meta.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise BagError(f"{meta}: not readable YAML ({exc}); delete it and run `ros2 bag "
+                       f"reindex` or read the .mcap file directly") from exc
+    info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
+    if not isinstance(info, dict):
+        raise BagError(f"{meta}: no 'rosbag2_bagfile_information' mapping, so not rosbag2 "
+                       f"metadata; delete it and run `ros2 bag reindex` or read the .mcap file "
+                       f"directly")
+    return info
+
+
 def bag_configuration(path: str | os.PathLike) -> dict[str, str]:
-    """The configuration a bag was recorded with (key -> text): metadata.yaml's custom_data,
-    else (a killed recording, or a lone .mcap file) the :data:`CONFIG_RECORD` metadata
-    records of its first MCAP file; {} when there is none."""
+    """The configuration a bag was recorded with (key -> text): the :data:`CONFIG_RECORD`
+    metadata records of its first MCAP file (written before its first message, so a killed
+    recording keeps them), updated by metadata.yaml's custom_data (which ``ros2 bag record
+    --custom-data`` writes, and which a ``ros2 bag reindex`` leaves out); {} when neither has
+    any."""
     p = Path(path)
-    meta = p / "metadata.yaml"
-    if p.is_dir() and meta.is_file():
-        info = yaml.safe_load(meta.read_text()).get("rosbag2_bagfile_information", {})
-        return {str(k): str(v) for k, v in (info.get("custom_data") or {}).items()}
+    info = bag_metadata(p) if p.is_dir() else None
+    custom = {str(k): str(v) for k, v in ((info or {}).get("custom_data") or {}).items()}
+    return {**_config_records(p), **custom}
+
+
+def _config_records(p: Path) -> dict[str, str]:
     files = mcap_files(p)
     out: dict[str, str] = {}
     if not files or not files[0].is_file():
@@ -238,10 +262,13 @@ def mcap_files(path: str | os.PathLike) -> list[Path]:
         return [p]
     if not p.is_dir():
         raise BagError(f"{p}: no such bag (expected a rosbag2 directory or a .mcap file)")
-    meta = p / "metadata.yaml"
-    if meta.is_file():
-        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
-        return [p / f for f in info["relative_file_paths"]]
+    info = bag_metadata(p)
+    if info is not None:
+        names = info.get("relative_file_paths")
+        if not isinstance(names, list) or not names:
+            raise BagError(f"{p / 'metadata.yaml'}: no relative_file_paths list; delete it and "
+                           f"run `ros2 bag reindex` or read the .mcap file directly")
+        return [p / str(f) for f in names]
     files = sorted(p.glob("*.mcap"))
     if not files:
         raise BagError(f"{p}: directory holds neither metadata.yaml nor any .mcap file")
@@ -282,12 +309,14 @@ def read_raw(path: str | os.PathLike, topics: list[str] | None = None,
 def topic_names(path: str | os.PathLike) -> set[str] | None:
     """The bag's topics that hold messages, from its metadata.yaml, without reading a
     message; None when there is no metadata (a single .mcap file, or a killed recording)."""
-    meta = Path(path) / "metadata.yaml"
-    if not meta.is_file():
+    info = bag_metadata(path) if Path(path).is_dir() else None
+    if info is None:
         return None
-    info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
-    return {t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []
-            if t.get("message_count", 0) > 0}
+    try:
+        return {t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []
+                if t.get("message_count", 0) > 0}
+    except (TypeError, KeyError, AttributeError):
+        return None                     # malformed: the caller reads the messages instead
 
 
 def file_finished(f: str | os.PathLike) -> bool:

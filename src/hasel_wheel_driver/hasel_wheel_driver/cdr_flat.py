@@ -31,17 +31,19 @@ Header = namedtuple("Header", "stamp frame_id")
 
 
 def _own_fields(schema_text: str) -> list[tuple[str, str]]:
-    """(type, name) of the top-level message's fields (constants and comments left out)."""
+    """(type, name) of the top-level message's fields (constants and comments left out).
+    A constant is ``TYPE NAME=value``: an '=' after the type (a bounded type such as
+    ``string<=8`` has one inside the type, and is a field)."""
     own = schema_text.split("\n" + "=" * 80 + "\n")[0]
     out = []
     for line in own.splitlines():
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
-        parts = line.split()
-        if len(parts) < 2 or "=" in line:       # a constant (TYPE NAME=value)
+        parts = line.split(None, 1)
+        if len(parts) < 2 or "=" in parts[1]:          # a constant
             continue
-        out.append((parts[0], parts[1]))
+        out.append((parts[0], parts[1].split()[0]))
     return out
 
 

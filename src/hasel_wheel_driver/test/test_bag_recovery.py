@@ -159,3 +159,31 @@ def test_a_topic_of_an_unknown_type_is_skipped_with_a_warning(tmp_path):
     got = list(read_messages(f, warn=said.append))
     assert [(tp, m.data) for tp, _, m in got] == [("/reference_speed", float(k)) for k in range(5)]
     assert len(said) == 1 and "/blob" in said[0] and "skipped" in said[0]
+
+
+@pytest.mark.parametrize("text, what", [("", "no 'rosbag2_bagfile_information'"),
+                                        ("a: [1, 2\n", "not readable YAML"),
+                                        ("rosbag2_bagfile_information: {version: 9}\n",
+                                         "no relative_file_paths")])
+def test_a_broken_metadata_yaml_is_named(tmp_path, text, what):
+    bag = tmp_path / "b"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text(text)
+    with pytest.raises(BagError, match=f"metadata.yaml: {what}"):
+        list(read_messages(bag))
+
+
+def test_configuration_survives_a_reindexed_metadata_yaml(tmp_path):
+    """ros2 bag reindex writes a metadata.yaml without our custom data: the configuration
+    still comes from the MCAP file's own records."""
+    import yaml
+
+    from hasel_wheel_driver.bagio import bag_configuration
+    bag = tmp_path / "r"
+    with BagWriter(bag, custom_data={"seed": "7"}) as b:
+        b.add_topic("/x", topics.REFERENCE.type, topics.REFERENCE.qos)
+        b.write("/x", {"data": 1.0}, 0)
+    meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+    meta["rosbag2_bagfile_information"].pop("custom_data")
+    (bag / "metadata.yaml").write_text(yaml.safe_dump(meta))
+    assert bag_configuration(bag) == {"seed": "7"}

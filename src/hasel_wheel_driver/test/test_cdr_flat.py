@@ -75,3 +75,17 @@ def test_only_flat_types_get_the_fast_decoder():
         assert flat_decoder(datatype, interfaces.full_definition(datatype)) is None, datatype
     for datatype in (TELEMETRY, STATE):
         assert flat_decoder(datatype, interfaces.full_definition(datatype)) is not None
+
+
+def test_bounded_fields_and_constants_are_told_apart():
+    """'=' inside a bounded type is a field (so the message is not flat); '=' after the name
+    is a constant (left out)."""
+    header = "std_msgs/Header header\n"
+    assert flat_decoder("a/msg/A", header + "string<=8 label\nfloat64 x\n") is None
+    assert flat_decoder("a/msg/B", header + "float64[<=3] v\nfloat64 x\n") is None
+    assert flat_decoder("a/msg/C", header + "uint8 MODE_A=1\nuint8 MODE_B = 2\nfloat64 x\n")
+    text = header + "uint8 MODE_A=1\nfloat64 x 0.5\n================================================================================\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+    encode = serialize_dynamic("a/msg/C", text)["a/msg/C"]
+    m = flat_decoder("a/msg/C", text)(encode({"header": {"stamp": {"sec": 3, "nanosec": 4},
+                                                           "frame_id": "w"}, "x": 1.5}))
+    assert m.x == 1.5 and m.header.stamp.sec == 3 and m._fields == ("header", "x")

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import asdict
 
@@ -29,6 +30,17 @@ from hasel_wheel_driver.bagexport import FORMATS, export
 from hasel_wheel_driver.baginfo import bag_info
 
 
+def _json(obj):
+    """``obj`` with non-finite floats as null (standard JSON has no NaN or Infinity)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _json(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json(v) for v in obj]
+    return obj
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     """Print what a bag holds."""
     try:
@@ -37,7 +49,7 @@ def cmd_info(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps(asdict(info), indent=1, allow_nan=True))
+        print(json.dumps(_json(asdict(info)), indent=1, allow_nan=False))
     else:
         print(info.text())
     return 0
@@ -54,7 +66,7 @@ def cmd_metrics(args: argparse.Namespace) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps([asdict(w) for w in wheels], indent=1, allow_nan=True))
+        print(json.dumps(_json([asdict(w) for w in wheels]), indent=1, allow_nan=False))
     else:
         for w in wheels:
             print(w.text())

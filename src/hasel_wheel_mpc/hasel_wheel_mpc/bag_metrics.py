@@ -50,6 +50,7 @@ class WheelMetrics:
     telemetry_samples: int = 0
     lost_samples: int = 0                    # gaps in the device's sample counter [samples]
     device_restarts: int = 0                 # the sample counter went back
+    duplicate_samples: int = 0               # the same sample counter twice
     fault_samples: int = 0                   # samples with any fault flag set
     fault_flags: int = 0                     # every flag seen (WheelTelemetry.FAULT_* bits)
 
@@ -58,8 +59,9 @@ class WheelMetrics:
                f"{self.decisions} MPC decisions, {self.deadline_misses} deadline misses, "
                f"smallest slack {1e3 * self.min_slack:.2f} ms",
                f"  link: {self.telemetry_samples} telemetry samples, {self.lost_samples} lost "
-               f"(sequence gaps), {self.device_restarts} device restarts, {self.fault_samples} "
-               f"with fault flags (bits 0x{self.fault_flags:x})",
+               f"(sequence gaps), {self.device_restarts} device restarts, "
+               f"{self.duplicate_samples} duplicates, {self.fault_samples} with fault flags "
+               f"(bits 0x{self.fault_flags:x})",
                "  start [s]  ref [rad/s]  steady window [s]   steady err [%]   NRMSE  "
                "rise/fall [s]  settle [s]"]
         for (t0, _), (w0, w1), m in zip(self.profile, self.steady_windows, self.segments):
@@ -78,6 +80,7 @@ class _Wheel:
     samples: int = 0
     lost: int = 0
     restarts: int = 0
+    duplicates: int = 0
     faulty: int = 0
     flags: int = 0
     last_seq: int | None = None
@@ -136,7 +139,9 @@ def bag_metrics(path: str | os.PathLike, window: float = 10.0,
             if w.last_seq is not None:
                 if seq > w.last_seq + 1:
                     w.lost += seq - w.last_seq - 1
-                elif seq <= w.last_seq:
+                elif seq == w.last_seq:
+                    w.duplicates += 1
+                elif seq < w.last_seq:
                     w.restarts += 1
             w.last_seq = seq
             if m.fault_flags:
@@ -156,5 +161,5 @@ def bag_metrics(path: str | os.PathLike, window: float = 10.0,
             ns, ns + chosen, tracker.profile, tracker.ends[-1], segs,
             [(max(t0, t1 - window), t1) for (t0, _), t1 in zip(tracker.profile, tracker.ends)],
             w.decisions, w.misses, w.min_slack if w.decisions else math.nan,
-            w.samples, w.lost, w.restarts, w.faulty, w.flags))
+            w.samples, w.lost, w.restarts, w.duplicates, w.faulty, w.flags))
     return out

@@ -144,7 +144,7 @@ class WheelLoop:
         if rec is not None:
             rec.telemetry(ns, s)
             rec.true_state(ns, self.plant.t, self.plant.wheel.state)
-            rec.estimate(ns, r.estimate, r.d_before)
+            rec.estimate(ns, r.estimate, r.d_before, s.t)
             if ref != self._last_ref:
                 rec.reference(ns, s.t, ref)
         self._last_ref = ref

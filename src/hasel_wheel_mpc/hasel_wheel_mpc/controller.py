@@ -62,6 +62,16 @@ class ControllerConfig:
         if self.speed_source not in SPEED_SOURCES:
             raise ValueError(f"speed_source = {self.speed_source!r}: expected one of "
                              f"{list(SPEED_SOURCES)}")
+        k = self.estimator_gain
+        if k is not None and not (_number(k) and 0.0 < k < 2.0):
+            raise ValueError(f"estimator gain = {k!r}: expected null (no estimator) or a "
+                             f"number 0 < K < 2 [1 per cycle]")
+        if self.estimator_mode not in ("tracking", "paper"):
+            raise ValueError(f"estimator mode = {self.estimator_mode!r}: expected 'tracking' "
+                             f"or 'paper'")
+        if not (_number(self.estimator_gate) and self.estimator_gate > 0.0):
+            raise ValueError(f"estimator gate = {self.estimator_gate!r}: expected a positive "
+                             f"speed band [rad/s]")
 
     def to_yaml(self) -> str:
         """The configuration as YAML text (floats in full precision: :meth:`from_yaml` gives
@@ -137,18 +147,44 @@ class ControllerConfig:
         return ControllerConfig.from_mapping(data, "overrides")
 
 
+def _number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
 def _plain(d: dict) -> dict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in d.items()}
 
 
 def _dataclass_from(cls, data: Any, where: str):
+    """``cls(**data)`` with each value checked against the type of the field's default
+    (numbers, booleans, lists of numbers), so a wrong value names the field."""
     if not isinstance(data, Mapping):
         raise ParameterError(f"{where}: expected a mapping of fields, got {type(data).__name__}")
-    names = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(names))
+    defaults = cls()
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
     if unknown:
         raise ParameterError(f"{where}: unknown field(s) {unknown}; known: {sorted(names)}")
-    kw = {k: (tuple(v) if isinstance(v, list) else v) for k, v in data.items()}
+    kw = {}
+    for name, v in data.items():
+        default = getattr(defaults, name)
+        if isinstance(default, bool):
+            ok, want = isinstance(v, bool), "true or false"
+        elif isinstance(default, int):
+            ok, want = _number(v) and float(v).is_integer(), "a whole number"
+            v = int(v) if ok else v
+        elif isinstance(default, float):
+            ok, want = _number(v), "a finite number"
+        elif isinstance(default, tuple):
+            ok, want = isinstance(v, (list, tuple)) and all(_number(x) for x in v), \
+                "a list of finite numbers"
+            v = tuple(v) if ok else v
+        else:
+            ok, want = True, ""
+        if not ok:
+            raise ParameterError(f"{where}: {name} = {v!r}: expected {want} (SI units, "
+                                 f"angles in rad; default {default!r})")
+        kw[name] = float(v) if isinstance(default, float) else v
     try:
         return cls(**kw)
     except (TypeError, ValueError) as exc:

@@ -6,7 +6,7 @@ For every wheel (namespace) of the bag that has ``telemetry`` and ``reference_sp
 optionally changed by overrides, feeds it every recorded telemetry sample with the reference
 in force at that sample, and compares what it computes with what the bag recorded:
 
-* every ``state_estimate`` (paired by its stamp, the device time), field by field;
+* every ``state_estimate`` (paired with its telemetry sample by stamp), field by field;
 * every ``mpc_status`` (paired in order), field by field, with its command.
 
 The one thing a replay cannot re-compute is how long the MPC took on the recording machine;
@@ -32,6 +32,8 @@ SUFFIX_TELEMETRY = "/" + topics.TELEMETRY.name
 SUFFIX_REFERENCE = "/" + topics.REFERENCE.name
 SUFFIX_ESTIMATE = "/" + topics.STATE_ESTIMATE.name
 SUFFIX_STATUS = "/" + topics.MPC_STATUS.name
+#: Most estimates held while waiting for their twin (recomputed or recorded) [messages].
+PAIRING_WINDOW = 3000
 
 
 class PlaybackClock:
@@ -81,9 +83,10 @@ class ReplayReport:
 
     @property
     def identical(self) -> bool:
-        """Every recorded estimate and decision was re-computed, and all are equal."""
+        """Every sample gave an estimate that pairs with a recorded one, every recorded
+        estimate and decision was re-computed, and all are equal."""
         return (not self.estimate_diffs and not self.decision_diffs
-                and self.estimates_compared == self.estimates_recorded
+                and self.estimates_compared == self.estimates_recorded == self.samples
                 and self.decisions_recomputed == self.decisions_recorded)
 
     @property
@@ -103,7 +106,9 @@ class ReplayReport:
         if self.identical:
             out.append("  IDENTICAL: every estimate and decision equals the recorded one")
             return "\n".join(out)
-        out.append(f"  DIFFERENT from t = {self.first_difference:.4f} s:")
+        first = self.first_difference
+        out.append("  DIFFERENT" + (f" from t = {first:.4f} s:" if math.isfinite(first) else
+                                    ": the counts above differ (no field compared differs)"))
         for kind, diffs in (("estimate", self.estimate_diffs), ("decision", self.decision_diffs)):
             for name, d in sorted(diffs.items(), key=lambda kv: kv[1].first_t):
                 out.append(f"    {kind}.{name}: {d.count} differ, largest |diff| "
@@ -165,18 +170,25 @@ def replay_bag(path: str | os.PathLike, overrides: Mapping[str, Any] | None = No
     bag's configuration), or ``config`` when given, or the defaults when the bag records
     none (a warning says so); ``overrides`` ({'section.field': value}, see
     :meth:`ControllerConfig.with_overrides`) change it.  ``progress``: progress bars on
-    stderr (on a terminal).  Raises :class:`BagError` when a
-    wanted namespace has no telemetry or no reference.
+    stderr (on a terminal).  A namespace without ``reference_speed`` messages (a ROS
+    recording that started after the reference was published, or one that set it as a
+    parameter) takes the reference from its ``mpc_status`` records (``reference_speed``, in
+    force from each decision on; a warning says so).  Raises :class:`BagError` when a wanted
+    namespace has no telemetry, or neither reference nor MPC status.
     """
     say = warn or (lambda text: None)
     overrides = dict(overrides or {})
     recorded_cfg = bag_configuration(path)
     found = _namespaces(path, say)
+    for ns, f in found.items():
+        if not f["ref"] and f["status"]:
+            f["ref"] = [(t, float(m.reference_speed)) for t, m in f["status"]]
+            f["ref_source"] = SUFFIX_STATUS[1:]
     wanted = sorted(namespaces) if namespaces is not None else sorted(
         ns for ns, f in found.items() if f["tel"][0] and f["ref"])
     if not wanted:
         raise BagError(f"{path}: no wheel to replay: no namespace has both {SUFFIX_TELEMETRY[1:]} "
-                       f"and {SUFFIX_REFERENCE[1:]} messages")
+                       f"and {SUFFIX_REFERENCE[1:]} (or {SUFFIX_STATUS[1:]}) messages")
     reports = []
     for ns in wanted:
         f = found.get(ns)
@@ -184,8 +196,12 @@ def replay_bag(path: str | os.PathLike, overrides: Mapping[str, Any] | None = No
             raise BagError(f"{path}: namespace {ns!r} has no {SUFFIX_TELEMETRY[1:]} messages; "
                            f"namespaces with telemetry: {sorted(k for k, v in found.items() if v['tel'][0])}")
         if not f["ref"]:
-            raise BagError(f"{path}: namespace {ns!r} has no {SUFFIX_REFERENCE[1:]} messages: the "
-                           f"replay needs the reference the controller tracked")
+            raise BagError(f"{path}: namespace {ns!r} has no {SUFFIX_REFERENCE[1:]} and no "
+                           f"{SUFFIX_STATUS[1:]} messages: the replay needs the reference the "
+                           f"controller tracked")
+        if "ref_source" in f:
+            say(f"{path}: {ns} has no {SUFFIX_REFERENCE[1:]} messages; the reference comes from "
+                f"its {SUFFIX_STATUS[1:]} records (in force from each decision on)")
         key = f"{ns}/controller.yaml"
         if config is not None:
             cfg, source = config, "the caller"
@@ -211,6 +227,8 @@ def _replay_one(path, ns: str, cfg: ControllerConfig, source: str, overrides: di
     rep = ReplayReport(ns, source, overrides, decisions_recorded=len(statuses))
     k_ref = 0
     ref = refs[0][1]
+    # an estimate and its recorded twin arrive close together; unpaired ones are dropped
+    # (oldest first) beyond PAIRING_WINDOW, so memory stays bounded on any bag
     pending_est: dict[int, tuple[dict, float]] = {}        # recomputed, waiting for the recorded
     recorded_est: dict[int, Any] = {}                      # recorded, waiting for the recomputed
     tel, est = ns + SUFFIX_TELEMETRY, ns + SUFFIX_ESTIMATE
@@ -227,12 +245,14 @@ def _replay_one(path, ns: str, cfg: ControllerConfig, source: str, overrides: di
             mine = samples.state_msg(e.t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter,
                                      e.eta_unwrapped, r.d_before, e.xi2_std, e.quality,
                                      e.accel_disturbance)
-            key = _stamp_ns(mine["header"]["stamp"])
+            key = _stamp_ns(m.header.stamp)       # an estimate is stamped as its sample
             if key in recorded_est:
                 _compare(recorded_est.pop(key), mine, t_ns / 1e9, rep.estimate_diffs)
                 rep.estimates_compared += 1
             else:
                 pending_est[key] = (mine, t_ns / 1e9)
+                if len(pending_est) > PAIRING_WINDOW:
+                    del pending_est[next(iter(pending_est))]
             if r.decision is not None:
                 k = rep.decisions_recomputed
                 rep.decisions_recomputed += 1
@@ -256,6 +276,8 @@ def _replay_one(path, ns: str, cfg: ControllerConfig, source: str, overrides: di
                 rep.estimates_compared += 1
             else:
                 recorded_est[key] = m
+                if len(recorded_est) > PAIRING_WINDOW:
+                    del recorded_est[next(iter(recorded_est))]
     for t_ns, _ in statuses[rep.decisions_recomputed:]:
         _compare({"missing_decision": True}, {}, t_ns / 1e9, rep.decision_diffs)
     return rep

@@ -12,7 +12,8 @@ until the end of the run).  Per segment (:class:`SegmentMetrics`):
 :class:`SegmentTracker` takes the samples and reference changes in time order and keeps only
 the last ``window`` seconds of samples, so a bag of any length is measured in the same
 memory.  A sample stamped at the very time of a reference change belongs to the new segment,
-whichever of the two arrives first.
+whichever of the two arrives first.  NaN speeds and NaN references are left out.  Errors are
+relative to |ref| (a reference of 0, a stop, has none: NaN).
 """
 from __future__ import annotations
 
@@ -23,8 +24,8 @@ from typing import NamedTuple
 
 class SegmentMetrics(NamedTuple):
     reference: float       # [rad/s]
-    steady_error: float    # |mean(speed) - ref| / ref over the steady window [%]
-    nrmse: float           # RMSE(speed - ref) / ref over the steady window [1]
+    steady_error: float    # |mean(speed) - ref| / |ref| over the steady window [%]
+    nrmse: float           # RMSE(speed - ref) / |ref| over the steady window [1]
     transition: float      # from the step until the speed first reaches ref [s] (rise/fall)
     settle: float          # from the step until the speed first comes within 2 % of ref [s]
 
@@ -45,14 +46,19 @@ class SegmentTracker:
         self._trans = math.nan
 
     def sample(self, t: float, v: float) -> None:
-        """A speed sample v [rad/s] at t [s] (t not decreasing)."""
+        """A speed sample v [rad/s] at t [s] (t not decreasing); NaN is left out."""
+        if v != v:
+            return
         if self._pending_t is not None and t != self._pending_t:
             self._commit()
         self._pending.append(v)
         self._pending_t = t
 
     def reference(self, t: float, ref: float) -> None:
-        """The reference [rad/s] from t [s] on; a repeat of the current value is no change."""
+        """The reference [rad/s] from t [s] on; a repeat of the current value is no change,
+        and NaN is left out."""
+        if ref != ref:
+            return
         if self._pending_t is not None and self._pending_t < t:
             self._commit()
         if self.profile and ref == self.profile[-1][1]:
@@ -89,7 +95,7 @@ class SegmentTracker:
             prev = self.profile[-2][1] if len(self.profile) > 1 else None
             ring = self._ring
             for v in self._pending:
-                if math.isnan(self._settle) and abs(v - ref) <= 0.02 * ref:
+                if math.isnan(self._settle) and abs(v - ref) <= 0.02 * abs(ref):
                     self._settle = t - t0
                 if (math.isnan(self._trans) and prev is not None
                         and ((v >= ref) if ref > prev else (v <= ref))):
@@ -105,8 +111,8 @@ class SegmentTracker:
         steady = [v for t, v in self._ring if t >= t1 - self.window]
         if steady and ref:
             mean = sum(steady) / len(steady)
-            ss = abs(mean - ref) / ref * 100.0
-            nrmse = math.sqrt(sum((v - ref) ** 2 for v in steady) / len(steady)) / ref
+            ss = abs(mean - ref) / abs(ref) * 100.0
+            nrmse = math.sqrt(sum((v - ref) ** 2 for v in steady) / len(steady)) / abs(ref)
         else:           # no sample in the window, or a stop (ref = 0): relative error undefined
             ss = nrmse = math.nan
         self.segments.append(SegmentMetrics(ref, ss, nrmse, self._trans, self._settle))

@@ -124,7 +124,8 @@ def test_link_errors_come_from_the_telemetry_counter_and_flags(tmp_path):
     flagged (watchdog, then encoder): the counts follow by hand."""
     path = tmp_path / "link"
     tel, ref, st = topics.TELEMETRY, topics.REFERENCE, topics.TRUE_STATE
-    seqs = list(range(100)) + list(range(103, 200)) + list(range(201, 250)) + list(range(0, 50))
+    seqs = (list(range(100)) + list(range(103, 200)) + list(range(201, 250)) + [249]
+            + list(range(0, 50)))
     with BagWriter(path) as b:
         for tp in (tel, ref, st):
             b.add_topic(topics.qualified(tp, "/w5"), tp.type, tp.qos)
@@ -139,9 +140,10 @@ def test_link_errors_come_from_the_telemetry_counter_and_flags(tmp_path):
                     round(t * 1e9))
     (w,) = bag_metrics(path)
     assert w.telemetry_samples == len(seqs)
-    assert (w.lost_samples, w.device_restarts) == (3 + 1, 1)
+    assert (w.lost_samples, w.device_restarts, w.duplicate_samples) == (3 + 1, 1, 1)
     assert (w.fault_samples, w.fault_flags) == (5, 1 | 16)
-    assert "4 lost (sequence gaps), 1 device restarts, 5 with fault flags (bits 0x11)" in w.text()
+    assert ("4 lost (sequence gaps), 1 device restarts, 1 duplicates, 5 with fault flags "
+            "(bits 0x11)") in w.text()
 
 
 def test_steady_windows_are_the_last_window_seconds_of_each_segment(bag):
@@ -181,3 +183,23 @@ def test_the_tracker_keeps_only_the_steady_window_in_memory():
         assert len(tr._ring) <= 2.0 * RATE + 2
     (seg,) = tr.finish()
     assert seg.steady_error == pytest.approx(0.5, rel=1e-3)      # mean 1.005 over the window
+
+
+def test_nan_speeds_and_references_are_left_out_and_a_negative_reference_is_relative():
+    from hasel_wheel_mpc.segments import SegmentTracker
+    tr = SegmentTracker(window=1.0)
+    tr.reference(0.0, -2.0)                      # rolling backwards at 2 rad/s
+    tr.reference(0.5, math.nan)                  # a broken message: no new segment
+    for k in range(300):
+        tr.sample(k / RATE, math.nan if k % 10 == 0 else -2.02)
+    (seg,) = tr.finish()
+    assert seg.steady_error == pytest.approx(1.0) and seg.nrmse == pytest.approx(0.01)
+    assert seg.settle == pytest.approx(1 / RATE)       # the first sample is NaN, the next fits
+
+
+def test_json_output_has_no_nan(bag, capsys):
+    import json
+    assert main(["bag", "metrics", str(bag), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out,
+                      parse_constant=lambda c: pytest.fail(f"non-standard JSON: {c}"))
+    assert data[0]["segments"][0][3] is None              # the first segment has no step

@@ -6,13 +6,11 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
 from hasel_wheel_driver import protocol as P
 from hasel_wheel_driver.link import DriverCore, LinkConfig
-from hasel_wheel_driver.samples import Command
 from hasel_wheel_mpc.sequencer import Sequencer
 from hasel_wheel_sim.virtual_teensy import DeviceProcess, LinkFaults
 

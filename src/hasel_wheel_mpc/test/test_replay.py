@@ -8,6 +8,7 @@ import dataclasses
 import math
 import shutil
 
+import numpy as np
 import pytest
 
 from hasel_wheel_driver import samples
@@ -121,16 +122,32 @@ def test_configuration_yaml_round_trip_and_errors():
         cfg.with_overrides({"mpc.brake_threshold": -1})
     with pytest.raises(ParameterError, match="speed_source = 'gps'"):
         cfg.with_overrides({"speed_source": "gps"})
+    with pytest.raises(ParameterError, match="estimator gain = 'fast': expected null"):
+        cfg.with_overrides({"estimator.gain": "fast"})
+    with pytest.raises(ParameterError, match="accel_noise = 'abc': expected a finite number"):
+        cfg.with_overrides({"observer.accel_noise": "abc"})
+    with pytest.raises(ParameterError, match="time_weighted = 1: expected true or false"):
+        cfg.with_overrides({"mpc.time_weighted": 1})
+    with pytest.raises(ParameterError, match="phi_a = 'x': expected a list of finite numbers"):
+        cfg.with_overrides({"mpc.phi_a": "x"})
+    assert cfg.with_overrides({"observer.window": 200}).observer.window == 200
 
 
 def test_as_received_is_what_a_node_decodes(recorded):
-    """The runner's controller sees the sample exactly as decoded from the bag."""
-    path, _ = recorded
-    for _, _, m in read_messages(path, topics=["/wheel0/telemetry"]):
+    """The runner's controller sees each sample exactly as decoded from the bag: the device
+    clock in whole microseconds as its time, the monitors as float32."""
+    path, log = recorded
+    n = 0
+    for (_, _, m), t_plant in zip(read_messages(path, topics=["/wheel0/telemetry"]), log.t):
         s = samples.telemetry_from_msg(m)
-        assert s.t == m.device_time_us * 1e-6
+        assert s.t == m.device_time_us * 1e-6 and abs(s.t - t_plant) <= 0.5e-6
         assert samples.as_received(s) == s
-        break
+        n += 1
+    assert n == len(log.t)
+    raw = samples.TelemetrySample(1 / 3, 333_333, 1, 0, 0.1, 0, 0, 0, 0, 0.1, 0.3, 0)
+    seen = samples.as_received(raw)
+    assert seen.t == 0.333333 and seen.hv_monitor == float(np.float32(0.1)) != 0.1
+    assert seen.current_monitor == float(np.float32(0.3))
 
 
 def test_replay_errors_name_what_is_missing(recorded):
