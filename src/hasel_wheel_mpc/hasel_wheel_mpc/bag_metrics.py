@@ -1,7 +1,9 @@
 """Closed-loop metrics of a recorded run, per wheel and per reference segment, from its bag
 (no rclpy, no ROS), in one pass and bounded memory.
 
-For every namespace that has a reference topic (``<ns>/reference_speed``) the speed is taken
+For every namespace that has a reference topic (``<ns>/reference_speed``; when the bag's
+metadata shows it without messages, as in a ROS recording that subscribed after the reference
+was published, the ``reference_speed`` of the MPC's ``mpc_status`` records) the speed is taken
 from the simulator's true state (``<ns>/sim/true_state``, xi2) when the bag has it, else from
 the observer (``<ns>/state_estimate``, xi2) -- a recording from the real wheel has no true
 state, and its metrics then include the observer's error.  The reference messages make the
@@ -9,7 +11,7 @@ profile: each starts a segment that lasts until the next (the last until the las
 sample).  Per segment, the definitions of :mod:`~hasel_wheel_mpc.segments`: steady-state
 error [%] and NRMSE over the segment's last ``window`` seconds, the rise or fall time after a
 step, and the settling time to 2 %.  From ``<ns>/mpc_status``: decisions, deadline misses and
-the smallest deadline slack [s].  From ``<ns>/telemetry``: the link's lost samples (gaps in
+the smallest deadline slack [s] of the driving (not braking) decisions.  From ``<ns>/telemetry``: the link's lost samples (gaps in
 the device's sample counter), device restarts (the counter going back) and samples with
 fault flags.
 
@@ -40,6 +42,7 @@ class WheelMetrics:
 
     namespace: str
     speed_source: str                        # the topic the speed came from
+    reference_source: str                    # the topic the reference came from
     profile: list[tuple[float, float]]       # (start [s], reference [rad/s])
     duration: float                          # [s] end of the last segment
     segments: list[SegmentMetrics]
@@ -55,7 +58,8 @@ class WheelMetrics:
     fault_flags: int = 0                     # every flag seen (WheelTelemetry.FAULT_* bits)
 
     def text(self) -> str:
-        out = [f"wheel {self.namespace or '/'} (speed from {self.speed_source}): "
+        out = [f"wheel {self.namespace or '/'} (speed from {self.speed_source}, reference from "
+               f"{self.reference_source}): "
                f"{self.decisions} MPC decisions, {self.deadline_misses} deadline misses, "
                f"smallest slack {1e3 * self.min_slack:.2f} ms",
                f"  link: {self.telemetry_samples} telemetry samples, {self.lost_samples} lost "
@@ -74,6 +78,7 @@ class WheelMetrics:
 @dataclass
 class _Wheel:
     speeds: dict[str, SegmentTracker]        # speed topic suffix -> its tracker
+    status_reference: bool = False           # the reference comes from mpc_status
     decisions: int = 0
     misses: int = 0
     min_slack: float = math.inf
@@ -105,7 +110,10 @@ def bag_metrics(path: str | os.PathLike, window: float = 10.0,
                 sources = (SUFFIX_TRUE, SUFFIX_ESTIMATE)
             else:
                 sources = (SUFFIX_TRUE,) if ns + SUFFIX_TRUE in known else (SUFFIX_ESTIMATE,)
-            w = wheels[ns] = _Wheel({s: SegmentTracker(window) for s in sources})
+            # a ROS recording that missed the reference (published before the recorder
+            # subscribed, or set as a parameter): the MPC's status records carry it
+            from_status = known is not None and ns + SUFFIX_REFERENCE not in known
+            w = wheels[ns] = _Wheel({s: SegmentTracker(window) for s in sources}, from_status)
         return w
 
     suffixes = (SUFFIX_REFERENCE, SUFFIX_TRUE, SUFFIX_ESTIMATE, SUFFIX_STATUS, SUFFIX_TELEMETRY)
@@ -129,9 +137,13 @@ def bag_metrics(path: str | os.PathLike, window: float = 10.0,
                 tracker.sample(t, m.xi2)
         elif topic.endswith(SUFFIX_STATUS):
             w = wheel(topic, SUFFIX_STATUS)
+            if w.status_reference:
+                for tracker in w.speeds.values():
+                    tracker.reference(t, float(m.reference_speed))
             w.decisions += 1
             w.misses += bool(m.deadline_missed)
-            w.min_slack = min(w.min_slack, float(m.deadline_slack))
+            if not m.braking:           # a braking decision has no deadline fallback
+                w.min_slack = min(w.min_slack, float(m.deadline_slack))
         else:
             w = wheel(topic, SUFFIX_TELEMETRY)
             w.samples += 1
@@ -158,7 +170,8 @@ def bag_metrics(path: str | os.PathLike, window: float = 10.0,
             continue
         segs = tracker.finish()
         out.append(WheelMetrics(
-            ns, ns + chosen, tracker.profile, tracker.ends[-1], segs,
+            ns, ns + chosen, ns + (SUFFIX_STATUS if w.status_reference else SUFFIX_REFERENCE),
+            tracker.profile, tracker.ends[-1], segs,
             [(max(t0, t1 - window), t1) for (t0, _), t1 in zip(tracker.profile, tracker.ends)],
             w.decisions, w.misses, w.min_slack if w.decisions else math.nan,
             w.samples, w.lost, w.restarts, w.duplicates, w.faulty, w.flags))

@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, Mapping, NamedTuple
 
 import numpy as np
@@ -145,6 +146,52 @@ class ControllerConfig:
             else:
                 node[path[-1]] = value
         return ControllerConfig.from_mapping(data, "overrides")
+
+
+#: ROS parameters of observer_node / mpc_node that are fields of ObserverConfig / MpcConfig.
+OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_rate")
+MPC_PARAMS = ("brake_threshold", "terminal_weight", "time_weighted", "deadline_margin",
+              "max_horizon")
+
+
+def _node_parameters(text: str, node: str, where: str) -> dict[str, Any]:
+    """``ros__parameters`` of ``node`` in a ROS parameter file's text (keys such as
+    ``/**/node``, ``node`` or ``/ns/node``)."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ParameterError(f"{where}: not YAML ({exc})") from exc
+    for key, value in (data or {}).items() if isinstance(data, Mapping) else ():
+        if str(key).rstrip("/").split("/")[-1] == node and isinstance(value, Mapping):
+            params = value.get("ros__parameters")
+            if isinstance(params, Mapping):
+                return dict(params)
+    raise ParameterError(f"{where}: no '{node}: ros__parameters:' section")
+
+
+def controller_from_ros_files(observer_yaml: str, mpc_yaml: str,
+                              where: str = "ROS parameter files") -> ControllerConfig:
+    """The controller that observer_node and mpc_node build from these parameter files'
+    texts (as recorded in a ROS bag's custom data): tuning and estimator; the model is the
+    paper's unless the files name a model file that exists here (``model_file`` or
+    ``wheel_params_file``).  Run-time changes (``ros2 param set``) are not in the files."""
+    from hasel_wheel_sim.model_file import controller_model
+
+    obs = _node_parameters(observer_yaml, "observer_node", f"{where}: observer")
+    mpc = _node_parameters(mpc_yaml, "mpc_node", f"{where}: mpc")
+    data: dict[str, Any] = {
+        "observer": {k: obs[k] for k in OBSERVER_PARAMS if k in obs},
+        "mpc": {k: mpc[k] for k in MPC_PARAMS if k in mpc},
+        "estimator": {k: obs[f"estimator_{k}"] for k in ("gain", "mode", "gate")
+                      if f"estimator_{k}" in obs}}
+    if data["estimator"].get("gain") == 0:
+        data["estimator"]["gain"] = None                  # 0 = estimator off (the node's rule)
+    cfg = ControllerConfig.from_mapping(data, where)
+    files = [obs.get("wheel_params_file") or "", obs.get("model_file") or ""]
+    if any(files) and all(not f or Path(f).is_file() for f in files):
+        params, ext = controller_model(*files)
+        cfg = dataclasses.replace(cfg, params=params, extensions=ext)
+    return cfg
 
 
 def _number(x: Any) -> bool:

@@ -2,10 +2,13 @@
 """
 from __future__ import annotations
 
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, RegisterEventHandler
+from launch.actions import (DeclareLaunchArgument, IncludeLaunchDescription, RegisterEventHandler,
+                            Shutdown)
 from launch.event_handlers import OnProcessIO
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
 #: What a node logs once it can take samples (its model is loaded or compiled).
@@ -64,3 +67,25 @@ def controller_parameter_arguments() -> list:
             DeclareLaunchArgument("mpc_params_file",
                                   default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
                                   description="ROS parameter file of mpc_node")]
+
+
+def controller_nodes(namespace) -> tuple:
+    """(observer_node, mpc_node) under ``namespace``, each with its parameter file (launch
+    arguments ``observer_params_file``, ``mpc_params_file``) and the model file of the
+    launch argument ``controller_model_file``; either one exiting shuts the launch down."""
+    model = {"model_file": ParameterValue(LaunchConfiguration("controller_model_file"),
+                                          value_type=str)}
+    return tuple(
+        Node(package="hasel_wheel_mpc", executable=f"{name}_node", name=f"{name}_node",
+             namespace=namespace, output="screen",
+             on_exit=Shutdown(reason=f"the {name} node exited"),
+             parameters=[LaunchConfiguration(f"{name}_params_file"), model])
+        for name in ("observer", "mpc"))
+
+
+def controller_model_argument() -> DeclareLaunchArgument:
+    """The ``controller_model_file`` launch argument."""
+    return DeclareLaunchArgument("controller_model_file", default_value="",
+                                 description="model file for the observer and the MPC, e.g. "
+                                             "hasel_wheel identify's model.yaml ('' = paper "
+                                             "model)")

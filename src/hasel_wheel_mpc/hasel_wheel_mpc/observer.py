@@ -49,6 +49,9 @@ class ObserverConfig:
     window: int = 300               # samples over which the quality is judged [1]
     disturbance_rate: float = 0.05  # random-walk intensity of each disturbance coefficient
                                     # (c, a, b) [rad/s^2 per sqrt(s)]; 0 = no disturbance state
+    reacquire_after: int = 30       # this many outliers in a row mean the estimate lost the
+                                    # wheel (started on a fast wheel, a long dropout): restart
+                                    # from those samples' line fit [samples]; 0 = never
 
 
 class Estimate(NamedTuple):
@@ -93,6 +96,8 @@ class Observer:
         self.on_since = 0.0
         self.rejected = 0
         self.updates = 0
+        self.reacquisitions = 0
+        self._run: list[tuple[float, float]] = []    # (t, angle) of the outliers in a row
         self._recent: deque[bool] = deque(maxlen=self.config.window)
         self._recent_bad = 0          # how many of self._recent are True (kept, not summed)
         self._prev: TelemetrySample | None = None
@@ -138,7 +143,11 @@ class Observer:
             self._recent_bad += bool(outlier)
         if outlier:
             self.rejected += 1
+            self._run.append((z.t, meas))
+            if c.reacquire_after and len(self._run) >= c.reacquire_after:
+                self._reacquire()
         else:
+            self._run = []
             k = h_p / s_inn
             self.x = self.x + k * nu
             # Joseph form: keeps P symmetric positive definite with the tiny encoder variance
@@ -151,6 +160,20 @@ class Observer:
             self.on_since = z.t
         self._prev = z
         return self._estimate(z)
+
+    def _reacquire(self) -> None:
+        """Restart from the outliers in a row: angle and speed from their least-squares line
+        (glitches come one at a time, so a run this long is the wheel itself), the
+        disturbance kept, the uncertainty of a first sample."""
+        t, a = (np.array(v) for v in zip(*self._run))
+        speed, intercept = np.polyfit(t - t[-1], a, 1)
+        c = self.config
+        r = (COUNT * COUNT) / 12.0 + c.encoder_noise ** 2
+        self.x[0], self.x[1] = intercept, speed
+        a_var = c.initial_disturbance_std ** 2 if c.disturbance_rate > 0.0 else 0.0
+        self.P = np.diag([r, (COUNT / (t[-1] - t[0])) ** 2 + r, a_var, a_var, a_var])
+        self.reacquisitions += 1
+        self._run = []
 
     def _predict(self, dt: float, prev: TelemetrySample) -> None:
         s = self._s

@@ -206,6 +206,7 @@ class ObserverNode(Node):
         values = {
             "sample_rate_hz": f"{rate:.1f}", "samples": str(self.received),
             "missing_samples": str(self.missing), "glitches_rejected": str(self.obs.rejected),
+            "reacquisitions": str(self.obs.reacquisitions),
             "updates": str(self.obs.updates), "quality": f"{quality:.3f}",
             "xi2_rad_s": f"{e.xi2:.4f}" if e else "-",
             "xi2_stddev_rad_s": f"{e.xi2_stddev:.4f}" if e else "-",

@@ -26,12 +26,14 @@ from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.bagexport import flatten
 from hasel_wheel_driver.bagio import BagError, bag_configuration, read_messages
 
-from .controller import ControllerConfig, SpeedController
+from .controller import ControllerConfig, SpeedController, controller_from_ros_files
 
 SUFFIX_TELEMETRY = "/" + topics.TELEMETRY.name
 SUFFIX_REFERENCE = "/" + topics.REFERENCE.name
 SUFFIX_ESTIMATE = "/" + topics.STATE_ESTIMATE.name
 SUFFIX_STATUS = "/" + topics.MPC_STATUS.name
+#: custom-data keys of the parameter files a ROS launch records (record.launch.py).
+ROS_FILES = ("file:observer.yaml", "file:mpc.yaml")
 #: Most estimates held while waiting for their twin (recomputed or recorded) [messages].
 PAIRING_WINDOW = 3000
 
@@ -166,9 +168,10 @@ def replay_bag(path: str | os.PathLike, overrides: Mapping[str, Any] | None = No
                progress: bool = False) -> list[ReplayReport]:
     """Replay every wheel of the bag at ``path`` (or those in ``namespaces``) and compare.
 
-    The controller is the one recorded for the namespace (``<ns>/controller.yaml`` in the
-    bag's configuration), or ``config`` when given, or the defaults when the bag records
-    none (a warning says so); ``overrides`` ({'section.field': value}, see
+    The controller is ``config`` when given, else the one recorded for the namespace
+    (``<ns>/controller.yaml`` in the bag's configuration), else the one built from the ROS
+    parameter files a launch recorded (:func:`controller_from_ros_files`), else the
+    defaults (a warning says so); ``overrides`` ({'section.field': value}, see
     :meth:`ControllerConfig.with_overrides`) change it.  ``progress``: progress bars on
     stderr (on a terminal).  A namespace without ``reference_speed`` messages (a ROS
     recording that started after the reference was published, or one that set it as a
@@ -208,6 +211,12 @@ def replay_bag(path: str | os.PathLike, overrides: Mapping[str, Any] | None = No
         elif key in recorded_cfg:
             cfg = ControllerConfig.from_yaml(recorded_cfg[key], f"{path}: {key}")
             source = f"the bag ({key})"
+        elif ROS_FILES[0] in recorded_cfg and ROS_FILES[1] in recorded_cfg:
+            cfg = controller_from_ros_files(recorded_cfg[ROS_FILES[0]],
+                                            recorded_cfg[ROS_FILES[1]], f"{path}: custom data")
+            source = f"the bag's ROS parameter files ({', '.join(ROS_FILES)})"
+            say(f"{path}: {ns}: controller from the recorded parameter files; run-time "
+                f"changes (ros2 param set) are not replayed")
         else:
             cfg, source = ControllerConfig(), "the defaults"
             say(f"{path}: the bag records no {key}; replaying {ns} with the default controller")

@@ -17,12 +17,25 @@ is close to but not bit-identical with the recording; the exact re-computation i
 ``hasel_wheel bag replay <bag>``.
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess, Shutdown
+from launch.actions import DeclareLaunchArgument, ExecuteProcess, OpaqueFunction, Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from hasel_wheel_mpc.launch_support import (controller_parameter_arguments, include_recording,
                                            recording_arguments, when_all_ready)
+
+def _play(context):
+    """``ros2 bag play`` of the wheel's telemetry, reference and commands (the topic names
+    built here, so that a root namespace '' gives /telemetry, not //telemetry)."""
+    ns = LaunchConfiguration("namespace").perform(context).strip("/")
+    prefix = f"/{ns}" if ns else ""
+    cmd = ["ros2", "bag", "play", LaunchConfiguration("bag").perform(context), "--rate",
+           LaunchConfiguration("rate").perform(context), "--disable-keyboard-controls",
+           "--topics", *(f"{prefix}/{name}" for name in ("telemetry", "reference_speed",
+                                                         "command"))]
+    return [ExecuteProcess(cmd=cmd, output="screen", name="bag_play",
+                           on_exit=Shutdown(reason="the bag has been played"))]
+
 
 def generate_launch_description():
     ns = LaunchConfiguration("namespace")
@@ -32,16 +45,12 @@ def generate_launch_description():
     mpc = Node(package="hasel_wheel_mpc", executable="mpc_node", name="mpc_node",
                namespace=ns, output="screen", parameters=[LaunchConfiguration("mpc_params_file")],
                remappings=[("command", "replay/command")])
-    play = ExecuteProcess(
-        cmd=["ros2", "bag", "play", LaunchConfiguration("bag"), "--rate",
-             LaunchConfiguration("rate"), "--disable-keyboard-controls", "--topics",
-             ["/", ns, "/telemetry"], ["/", ns, "/reference_speed"], ["/", ns, "/command"]],
-        output="screen", name="bag_play", on_exit=Shutdown(reason="the bag has been played"))
+    play = OpaqueFunction(function=_play)
     record = include_recording(["observer_params_file", "mpc_params_file"])
     return LaunchDescription([
         DeclareLaunchArgument("bag", description="bag to play (directory or .mcap file)"),
         DeclareLaunchArgument("namespace", default_value="wheel0",
-                              description="the wheel's namespace in the bag (no leading '/')"),
+                              description="the wheel's namespace in the bag ('' = root)"),
         DeclareLaunchArgument("rate", default_value="1.0", description="playback rate [1]"),
         *recording_arguments(),
         *controller_parameter_arguments(),

@@ -16,29 +16,19 @@ Every topic is recorded to an MCAP bag (record.launch.py) with the parameter fil
 file (its seed) and the controller's model file in the bag's custom data.
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, Shutdown
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
-from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
-from hasel_wheel_mpc.launch_support import (controller_parameter_arguments, include_recording,
+from hasel_wheel_mpc.launch_support import (controller_model_argument, controller_nodes,
+                                           controller_parameter_arguments, include_recording,
                                            recording_arguments, when_all_ready)
 
 def generate_launch_description():
     sim_share = FindPackageShare("hasel_wheel_sim")
     namespace = LaunchConfiguration("namespace")
-    controller_model = {"model_file": ParameterValue(LaunchConfiguration("controller_model_file"),
-                                                     value_type=str)}
-    observer = Node(package="hasel_wheel_mpc", executable="observer_node", name="observer_node",
-                    namespace=namespace, output="screen",
-                    on_exit=Shutdown(reason="the observer exited"),
-                    parameters=[LaunchConfiguration("observer_params_file"), controller_model])
-    mpc = Node(package="hasel_wheel_mpc", executable="mpc_node", name="mpc_node",
-               namespace=namespace, output="screen",
-               on_exit=Shutdown(reason="the MPC exited"),
-               parameters=[LaunchConfiguration("mpc_params_file"), controller_model])
+    observer, mpc = controller_nodes(namespace)
     sim = IncludeLaunchDescription(
         PythonLaunchDescriptionSource(PathJoinSubstitution([sim_share, "launch", "sim.launch.py"])),
         launch_arguments={"namespace": namespace,
@@ -57,9 +47,7 @@ def generate_launch_description():
                               description="plant YAML of the simulator (seed, switching, effects)"),
         DeclareLaunchArgument("time_scale", default_value="1.0",
                               description="simulated seconds per wall second"),
-        DeclareLaunchArgument("controller_model_file", default_value="",
-                              description="model file for the observer and the MPC, e.g. "
-                                          "hasel_wheel identify's model.yaml ('' = paper model)"),
+        controller_model_argument(),
         DeclareLaunchArgument("plant_model_file", default_value="",
                               description="model file as the simulated plant's dynamics (then "
                                           "pass plant_file:=.../plant.yaml: sensor/link "

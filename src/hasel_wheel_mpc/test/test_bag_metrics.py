@@ -79,7 +79,8 @@ def test_segments_match_the_closed_forms(bag):
 def test_the_command_line_prints_each_wheel(bag, tmp_path, capsys):
     assert main(["bag", "metrics", str(bag)]) == 0
     out = capsys.readouterr().out
-    assert "wheel /w1 (speed from /w1/sim/true_state): 10 MPC decisions, 2 deadline misses" in out
+    assert ("wheel /w1 (speed from /w1/sim/true_state, reference from /w1/reference_speed): "
+            "10 MPC decisions, 2 deadline misses") in out
     assert "wheel /w2" in out
     empty = tmp_path / "empty"
     with BagWriter(empty) as b:
@@ -203,3 +204,26 @@ def test_json_output_has_no_nan(bag, capsys):
     data = json.loads(capsys.readouterr().out,
                       parse_constant=lambda c: pytest.fail(f"non-standard JSON: {c}"))
     assert data[0]["segments"][0][3] is None              # the first segment has no step
+
+
+def test_without_reference_messages_the_mpc_status_gives_the_reference(tmp_path):
+    """A ROS recording whose reference_speed topic is declared but empty (the reference was
+    published before the recorder subscribed): the status records carry the reference."""
+    path = tmp_path / "ros"
+    st, ref, status = topics.TRUE_STATE, topics.REFERENCE, topics.MPC_STATUS
+    with BagWriter(path) as b:
+        for tp in (st, ref, status):
+            b.add_topic(topics.qualified(tp, "/w6"), tp.type, tp.qos)
+        for k in range(int(20 * RATE)):
+            t = k / RATE
+            r = 1.0 if t < 10.0 else 1.5
+            if k % 30 == 0:
+                b.write("/w6/mpc_status", samples.mpc_status_msg(
+                    t, Command(1, 0.1, 0.3, k), r, r, 0.0, 1e-3, 0.02, 36, False, False),
+                    round(t * 1e9))
+            b.write("/w6/sim/true_state", samples.state_msg(t, 0.0, r * 1.01, 0, 0.0, 0.0, 0),
+                    round(t * 1e9))
+    (w,) = bag_metrics(path)
+    assert w.reference_source == "/w6/mpc_status"
+    assert w.profile == [(0.0, 1.0), (10.0, 1.5)]
+    assert [s.steady_error for s in w.segments] == pytest.approx([1.0, 1.0])

@@ -96,3 +96,27 @@ def test_without_the_disturbance_state_the_coefficients_stay_zero():
         if s is not None:
             e = obs.step(s)
     assert e.accel_coefficients == (0.0, 0.0, 0.0)
+
+
+@pytest.mark.parametrize("reacquire", [30, 0])
+def test_an_observer_started_on_a_fast_wheel_locks_on(reacquire):
+    """Started on a wheel already coasting at 20 rad/s (a node restarted on a rolling
+    wheel): the first guess (0 rad/s, std 2) is 0.067 rad behind after one sample, far
+    beyond the gate, so every sample looks like a glitch.  After ``reacquire_after`` such
+    samples in a row the observer restarts from their line fit and then tracks the coasting
+    wheel; without it (0) it never recovers."""
+    p = Plant(config=PlantConfig(seed=3, effects=effects_from_mapping(ENCODER)), xi2=20.0)
+    obs = Observer(config=ObserverConfig(reacquire_after=reacquire))
+    rows = []
+    for _ in range(int(1.0 / TICK)):
+        s = p.step()
+        if s is not None:
+            rows.append((s.t, p.wheel.s[2], obs.step(s).xi2))
+    t, v, est = map(np.array, zip(*rows))
+    late = t > 0.3
+    if reacquire:
+        assert obs.reacquisitions == 1 and obs.rejected == reacquire
+        assert rmse(est[late], v[late]) < 0.05
+    else:
+        assert obs.reacquisitions == 0 and obs.rejected > 0.9 * len(t)
+        assert rmse(est[late], v[late]) > 5.0

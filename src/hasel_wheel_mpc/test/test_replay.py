@@ -164,3 +164,20 @@ def test_replay_cli(recorded, capsys):
     assert "DIFFERENT" in capsys.readouterr().out
     assert bag_main(["replay", str(path), "--set", "mpc.nope=1"]) == 2
     assert "no field 'nope'" in capsys.readouterr().err
+
+
+def test_the_packaged_ros_parameter_files_are_the_core_defaults():
+    """observer.yaml and mpc.yaml (what the nodes load) build the same controller as the
+    core's defaults, so a ROS bag replays with what the nodes ran."""
+    from hasel_wheel_mpc.controller import controller_from_ros_files
+    obs = packaged("hasel_wheel_mpc", "observer.yaml").read_text()
+    mpc = packaged("hasel_wheel_mpc", "mpc.yaml").read_text()
+    assert controller_from_ros_files(obs, mpc) == ControllerConfig()
+    changed = controller_from_ros_files(
+        obs.replace("accel_noise: 0.05", "accel_noise: 0.08").replace("estimator_gain: 0.1",
+                                                                      "estimator_gain: 0.0"),
+        mpc.replace("brake_threshold: 0.3", "brake_threshold: 0.25"))
+    assert changed.observer.accel_noise == 0.08 and changed.estimator_gain is None
+    assert changed.mpc.brake_threshold == 0.25
+    with pytest.raises(ParameterError, match="no 'mpc_node: ros__parameters:' section"):
+        controller_from_ros_files(obs, obs)

@@ -1,0 +1,54 @@
+"""The closed speed loop on the real wheel: driver -> observer -> MPC -> driver, recorded.
+
+    ros2 launch hasel_wheel_mpc hardware_closed_loop.launch.py \\
+        port:=/dev/serial/by-id/usb-Teensyduino_USB_Serial_12345-if00 bag_dir:=bags/run1
+    ros2 param set /wheel0/driver hv_enabled true          # HV stays off until you ask
+    ros2 topic pub --once /wheel0/reference_speed std_msgs/msg/Float64 "{data: 1.5}"
+
+The observer and the MPC start first; the driver (hasel_wheel_driver's driver.launch.py)
+starts once both have logged "ready:", so the first telemetry finds them loaded.  The driver
+keeps high voltage off until ``hv_enabled`` is set true, and switches it off again when the
+link goes quiet, a command is rejected or the launch stops.  Every topic is recorded to an
+MCAP bag (record.launch.py) with the driver's, observer's and MPC's parameter files in the
+bag's custom data; record:=false turns recording off.
+"""
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
+from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
+from launch_ros.substitutions import FindPackageShare
+
+from hasel_wheel_mpc.launch_support import (controller_model_argument, controller_nodes,
+                                           controller_parameter_arguments, include_recording,
+                                           recording_arguments, when_all_ready)
+
+
+def generate_launch_description():
+    driver_share = FindPackageShare("hasel_wheel_driver")
+    namespace = LaunchConfiguration("namespace")
+    observer, mpc = controller_nodes(namespace)
+    driver = IncludeLaunchDescription(
+        PythonLaunchDescriptionSource(PathJoinSubstitution([driver_share, "launch",
+                                                            "driver.launch.py"])),
+        launch_arguments={"namespace": namespace, "port": LaunchConfiguration("port"),
+                          "params_file": LaunchConfiguration("driver_params_file")}.items())
+    record = include_recording(["driver_params_file", "observer_params_file", "mpc_params_file",
+                                "controller_model_file"])
+    return LaunchDescription([
+        *recording_arguments(),
+        DeclareLaunchArgument("namespace", default_value="wheel0",
+                              description="namespace of the wheel's topics and nodes"),
+        DeclareLaunchArgument("port", default_value="/dev/ttyACM0",
+                              description="the Teensy's serial device (a /dev/serial/by-id/... "
+                                          "name survives replugging)"),
+        DeclareLaunchArgument("driver_params_file",
+                              default_value=PathJoinSubstitution([driver_share, "config",
+                                                                  "driver_node.yaml"]),
+                              description="ROS parameter file of the driver"),
+        controller_model_argument(),
+        *controller_parameter_arguments(),
+        *when_all_ready([observer, mpc], [driver]),
+        record,
+        observer,
+        mpc,
+    ])
