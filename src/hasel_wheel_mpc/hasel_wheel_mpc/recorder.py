@@ -30,15 +30,29 @@ def git_revision(cwd: str | Path | None = None) -> str:
         return "unknown"
 
 
+def package_versions() -> str:
+    """'name version, ...' of this project's installed Python packages (what a bag from an
+    installed workspace can say when the git revision is unknown)."""
+    from importlib import metadata
+    out = []
+    for name in ("hasel_wheel_driver", "hasel_wheel_sim", "hasel_wheel_mpc"):
+        try:
+            out.append(f"{name} {metadata.version(name)}")
+        except metadata.PackageNotFoundError:
+            out.append(f"{name} (not installed)")
+    return ", ".join(out)
+
+
 def launch_custom_data(files: Iterable[str], extra: Mapping[str, str] | None = None
                        ) -> dict[str, str]:
     """custom_data for ``ros2 bag record --custom-data KEY=VALUE ...`` from a launch file: the
-    git revision (of the working directory), ``extra``, and every file in ``files`` under
+    git revision (of the working directory; 'unknown' outside a checkout), the installed
+    package versions, ``extra``, and every file in ``files`` under
     ``file:<name>``.  Jazzy's recorder cuts each pair at every '=' (keeping the first two
     pieces), so a file goes in as its text when that has no '='; else as its YAML data
     re-written without comments (the same parameters) when that has none; else as its path
     and sha256.  An '=' in the keys or values of ``extra`` is refused."""
-    out = {"git_revision": git_revision()}
+    out = {"git_revision": git_revision(), "packages": package_versions()}
     for key, value in (extra or {}).items():
         if "=" in key or "=" in value:
             raise ValueError(f"custom data {key!r}: keys and values must not contain '=' "

@@ -27,6 +27,8 @@ def test_files_survive_jazzy_s_key_value_split(tmp_path):
     digest = hashlib.sha256(tricky.read_bytes()).hexdigest()
     assert custom["file:notes.yaml"] == f"{tricky.resolve()} sha256 {digest}"
     assert custom["tool"] == "sim_closed_loop" and custom["git_revision"]
+    from importlib import metadata
+    assert f"hasel_wheel_mpc {metadata.version('hasel_wheel_mpc')}" in custom["packages"]
     assert _as_jazzy_parses([f"{k}={v}" for k, v in custom.items()]) == custom
 
 
