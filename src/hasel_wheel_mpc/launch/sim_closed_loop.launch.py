@@ -3,6 +3,7 @@
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py [namespace:=wheel0] [time_scale:=1.0]
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py controller_model_file:=out/identify/model.yaml
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py bag_dir:=bags/run1   # or record:=false
+    ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py wheels:=4 time_scale:=0.5   # /wheel0..3
     ros2 topic pub --once reference_speed std_msgs/msg/Float64 "{data: 1.5}"
     ros2 param set /mpc_node reference_speed 2.0
 
@@ -16,7 +17,7 @@ Every topic is recorded to an MCAP bag (record.launch.py) with the parameter fil
 file (its seed) and the controller's model file in the bag's custom data.
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.substitutions import FindPackageShare
@@ -25,22 +26,44 @@ from hasel_wheel_mpc.launch_support import (controller_model_argument, controlle
                                            controller_parameter_arguments, include_recording,
                                            recording_arguments, when_all_ready)
 
+
+def _wheels(context):
+    """Each wheel's sim, observer and MPC: one wheel under ``namespace``, or ``wheels`` > 1
+    of them under wheel0, wheel1, ... (wheel i on plant_file's seed + i)."""
+    text = LaunchConfiguration("wheels").perform(context)
+    if not text.isdigit() or int(text) < 1:
+        raise ValueError(f"wheels:={text!r}: expected a whole number >= 1")
+    n = int(text)
+    names = ([LaunchConfiguration("namespace").perform(context)] if n == 1 else
+             [f"wheel{i}" for i in range(n)])
+    sim_share = FindPackageShare("hasel_wheel_sim")
+    actions = []
+    for i, ns in enumerate(names):
+        observer, mpc = controller_nodes(ns)
+        sim = IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(PathJoinSubstitution([sim_share, "launch",
+                                                                "sim.launch.py"])),
+            launch_arguments={"namespace": ns,
+                              "plant_file": LaunchConfiguration("plant_file"),
+                              "time_scale": LaunchConfiguration("time_scale"),
+                              "seed_offset": str(i),
+                              "model_file": LaunchConfiguration("plant_model_file")}.items())
+        actions += [*when_all_ready([observer, mpc], [sim]), observer, mpc]
+    return actions
+
+
 def generate_launch_description():
     sim_share = FindPackageShare("hasel_wheel_sim")
-    namespace = LaunchConfiguration("namespace")
-    observer, mpc = controller_nodes(namespace)
-    sim = IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(PathJoinSubstitution([sim_share, "launch", "sim.launch.py"])),
-        launch_arguments={"namespace": namespace,
-                          "plant_file": LaunchConfiguration("plant_file"),
-                          "time_scale": LaunchConfiguration("time_scale"),
-                          "model_file": LaunchConfiguration("plant_model_file")}.items())
     record = include_recording(["observer_params_file", "mpc_params_file", "plant_file",
                                 "controller_model_file"])
     return LaunchDescription([
         *recording_arguments(),
         DeclareLaunchArgument("namespace", default_value="",
-                              description="namespace of the wheel's topics and nodes ('' = root)"),
+                              description="namespace of the wheel's topics and nodes ('' = "
+                                          "root); with wheels > 1: wheel0, wheel1, ..."),
+        DeclareLaunchArgument("wheels", default_value="1",
+                              description="independent closed loops, each in its own namespace "
+                                          "and on its own plant seed, all in one bag"),
         DeclareLaunchArgument("plant_file",
                               default_value=PathJoinSubstitution([sim_share, "config",
                                                                   "plant_realistic.yaml"]),
@@ -53,8 +76,6 @@ def generate_launch_description():
                                           "pass plant_file:=.../plant.yaml: sensor/link "
                                           "effects only); '' = plant_file's effects"),
         *controller_parameter_arguments(),
-        *when_all_ready([observer, mpc], [sim]),
         record,
-        observer,
-        mpc,
+        OpaqueFunction(function=_wheels),
     ])

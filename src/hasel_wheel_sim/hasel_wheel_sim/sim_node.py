@@ -13,6 +13,7 @@ from two places), e.g. plant_realistic.yaml; config/plant.yaml has none.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from sensor_msgs.msg import JointState
 from hasel_wheel_driver import samples, topics
 from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param,
                                                  publish_status, qos_profile, run_node,
-                                                 text_param)
+                                                 int_param, text_param)
 from hasel_wheel_sim.plant import load_plant_model
 from hasel_wheel_sim.sim_runtime import SimRuntime
 
@@ -51,11 +52,17 @@ class SimNode(Node):
             "initial_speed", 1.0, float_param("wheel speed at start [rad/s]", 0.0, 20.0, True)).value
         scale = self.declare_parameter(
             "time_scale", 1.0, float_param("simulated seconds per wall second [1]", 0.01, 100.0)).value
+        seed_offset = self.declare_parameter(
+            "seed_offset", 0,
+            int_param("added to plant_file's seed (wheel i of a multi-wheel launch: i) [1]",
+                      0, 1_000_000, True)).value
         self.declare_parameter("frame_id", "wheel", text_param("frame_id of telemetry headers"))
         self.declare_parameter("diagnostics_period", 1.0,
                                float_param("period of /diagnostics [s]", 0.1, 60.0, True))
         self.frame_id = self.get_parameter("frame_id").value
-        self.core = SimRuntime(*load_plant_model(wheel_file, plant_file, model_file), w0, scale)
+        params, plant = load_plant_model(wheel_file, plant_file, model_file)
+        plant = dataclasses.replace(plant, seed=plant.seed + seed_offset)
+        self.core = SimRuntime(params, plant, w0, scale)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         pubs = create_publishers(self, (topics.TELEMETRY, topics.JOINT_STATES, topics.TRUE_STATE,
@@ -66,7 +73,8 @@ class SimNode(Node):
         self.t0_ns = self.get_clock().now().nanoseconds
         self.create_timer(0.01, self._on_tick)
         self.create_timer(self.get_parameter("diagnostics_period").value, self._on_diagnostics)
-        self.get_logger().info(f"simulating {model_file or wheel_file} with {plant_file} at x{scale:g}")
+        self.get_logger().info(f"simulating {model_file or wheel_file} with {plant_file} (seed "
+                               f"{plant.seed}) at x{scale:g}")
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         for p in params:

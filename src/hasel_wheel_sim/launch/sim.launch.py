@@ -20,6 +20,9 @@ def generate_launch_description():
                               description="plant YAML (seed, switching, effects)"),
         DeclareLaunchArgument("time_scale", default_value="1.0",
                               description="simulated seconds per wall second"),
+        DeclareLaunchArgument("seed_offset", default_value="0",
+                              description="added to plant_file's seed (gives wheels of one "
+                                          "launch their own noise)"),
         DeclareLaunchArgument("model_file", default_value="",
                               description="model file (e.g. hasel_wheel identify's model.yaml) "
                                           "as the plant's dynamics; then plant_file may hold "
@@ -30,6 +33,8 @@ def generate_launch_description():
              parameters=[LaunchConfiguration("params_file"),
                          {"plant_file": LaunchConfiguration("plant_file"),
                           "time_scale": LaunchConfiguration("time_scale"),
+                          "seed_offset": ParameterValue(LaunchConfiguration("seed_offset"),
+                                                        value_type=int),
                           "model_file": ParameterValue(LaunchConfiguration("model_file"),
                                                        value_type=str)}]),
     ])
