@@ -72,8 +72,9 @@ class _ParquetSink:
             import pyarrow as pa
             import pyarrow.parquet as pq
         except ImportError as exc:
-            raise BagError("Parquet export needs pyarrow, which is not installed; install it "
-                           "(pip install 'pyarrow>=15') or export CSV") from exc
+            raise BagError(f"Parquet export needs pyarrow, which cannot be imported ({exc}); "
+                           f"install it (pip install 'pyarrow>=15'; with NumPy 1.x, as on "
+                           f"Ubuntu 24.04: 'pyarrow>=15,<26') or export CSV") from exc
         self._pa, self._pq = pa, pq
         self._file, self._columns = file, columns
         self._rows: list[list[Any]] = []

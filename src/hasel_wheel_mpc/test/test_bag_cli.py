@@ -84,3 +84,16 @@ def test_export_refuses_an_unknown_format(tmp_path):
     from hasel_wheel_driver.bagexport import export
     with pytest.raises(BagError, match="export format 'xlsx': expected one of"):
         export(tmp_path, tmp_path / "o", fmt="xlsx")
+
+
+def test_parquet_without_pyarrow_says_what_to_install(tmp_path, monkeypatch):
+    import sys
+
+    from hasel_wheel_driver.bagexport import export
+    monkeypatch.setitem(sys.modules, "pyarrow", None)          # import pyarrow now fails
+    bag = tmp_path / "b"
+    with BagWriter(bag) as b:
+        b.add_topic("/r", topics.REFERENCE.type, topics.REFERENCE.qos)
+        b.write("/r", {"data": 1.0}, 0)
+    with pytest.raises(BagError, match=r"Parquet export needs pyarrow.*pip install.*or export CSV"):
+        export(bag, tmp_path / "o", fmt="parquet")
