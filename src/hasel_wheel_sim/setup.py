@@ -18,7 +18,8 @@ setup(
     ],
     # lower bounds only, so that Ubuntu 24.04 / ROS 2 Jazzy system packages satisfy them
     install_requires=["setuptools", "numpy>=1.24", "PyYAML>=5.4", "hasel_wheel_driver"],
-    extras_require={"fast": ["numba>=0.58"]},  # compiled model core (falls back to Python)
+    extras_require={"fast": ["numba>=0.58"],   # compiled model core (falls back to Python)
+                    "test": ["pytest"]},       # colcon test runs pytest (not unittest)
     zip_safe=False,
     maintainer="HASEL wheel developers",
     maintainer_email="dev@hasel-wheel.invalid",
