@@ -31,6 +31,7 @@ setup(
             "hasel_wheel_bag = hasel_wheel_mpc.bag_cli:main",
             "observer_node = hasel_wheel_mpc.observer_node:main",
             "mpc_node = hasel_wheel_mpc.mpc_node:main",
+            "trial_node = hasel_wheel_mpc.trial_node:main",
         ],
     },
 )

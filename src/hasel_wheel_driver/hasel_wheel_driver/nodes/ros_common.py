@@ -95,22 +95,28 @@ def run_node(factory: Any, name: str, args: Any = None) -> None:
     """The Jazzy demos' ``main()`` (demo_nodes_py talker.py), shared by every node.
 
     Build the node (a bad parameter or file exits with status 2 and the reason), spin until
-    Ctrl-C or an external shutdown, then destroy the node and shut rclpy down.  A second SIGINT
-    during clean-up (a terminal's Ctrl-C plus the one ``ros2 launch`` forwards) is ignored, so
+    Ctrl-C or an external shutdown (or, for a node with a ``finished`` future, until that
+    completes), then destroy the node and shut rclpy down.  A second SIGINT during clean-up
+    (a terminal's Ctrl-C plus the one ``ros2 launch`` forwards) is ignored, so
     ``destroy_node`` still runs to the end once.
     """
     import rclpy
+    from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
 
     rclpy.init(args=args)
     try:
         node = factory()
-    except ValueError as exc:          # includes ParameterError: names the field and range
-        print(f"{name}: {exc}")
+    except (ValueError, ParameterException) as exc:   # ParameterError and rclpy's own checks
+        print(f"{name}: {exc}")                       # (type, range): name the field and range
         rclpy.try_shutdown()
         raise SystemExit(2)
     try:
-        rclpy.spin(node)
+        finished = getattr(node, "finished", None)
+        if finished is None:
+            rclpy.spin(node)
+        else:
+            rclpy.spin_until_future_complete(node, finished)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
