@@ -57,16 +57,19 @@ def include_recording(config_files: list[str]) -> IncludeLaunchDescription:
                           "config_files": files}.items())
 
 
+def share_file_argument(name: str, package: str, filename: str,
+                        description: str) -> DeclareLaunchArgument:
+    """Launch argument ``name`` whose default is ``<package's share>/config/<filename>``."""
+    return DeclareLaunchArgument(
+        name, description=description,
+        default_value=PathJoinSubstitution([FindPackageShare(package), "config", filename]))
+
+
 def controller_parameter_arguments() -> list:
     """The ``observer_params_file`` and ``mpc_params_file`` launch arguments."""
-    share = FindPackageShare("hasel_wheel_mpc")
-    return [DeclareLaunchArgument("observer_params_file",
-                                  default_value=PathJoinSubstitution([share, "config",
-                                                                      "observer.yaml"]),
-                                  description="ROS parameter file of observer_node"),
-            DeclareLaunchArgument("mpc_params_file",
-                                  default_value=PathJoinSubstitution([share, "config", "mpc.yaml"]),
-                                  description="ROS parameter file of mpc_node")]
+    return [share_file_argument(f"{name}_params_file", "hasel_wheel_mpc", f"{name}.yaml",
+                                f"ROS parameter file of {name}_node")
+            for name in ("observer", "mpc")]
 
 
 def controller_nodes(namespace) -> tuple:

@@ -20,7 +20,8 @@ from launch_ros.substitutions import FindPackageShare
 
 from hasel_wheel_mpc.launch_support import (controller_model_argument, controller_nodes,
                                            controller_parameter_arguments, include_recording,
-                                           recording_arguments, when_all_ready)
+                                           recording_arguments, share_file_argument,
+                                           when_all_ready)
 
 
 def generate_launch_description():
@@ -41,10 +42,8 @@ def generate_launch_description():
         DeclareLaunchArgument("port", default_value="/dev/ttyACM0",
                               description="the Teensy's serial device (a /dev/serial/by-id/... "
                                           "name survives replugging)"),
-        DeclareLaunchArgument("driver_params_file",
-                              default_value=PathJoinSubstitution([driver_share, "config",
-                                                                  "driver_node.yaml"]),
-                              description="ROS parameter file of the driver"),
+        share_file_argument("driver_params_file", "hasel_wheel_driver", "driver_node.yaml",
+                            "ROS parameter file of the driver"),
         controller_model_argument(),
         *controller_parameter_arguments(),
         *when_all_ready([observer, mpc], [driver]),

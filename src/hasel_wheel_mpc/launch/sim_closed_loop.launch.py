@@ -24,7 +24,8 @@ from launch_ros.substitutions import FindPackageShare
 
 from hasel_wheel_mpc.launch_support import (controller_model_argument, controller_nodes,
                                            controller_parameter_arguments, include_recording,
-                                           recording_arguments, when_all_ready)
+                                           recording_arguments, share_file_argument,
+                                           when_all_ready)
 
 
 def _wheels(context):
@@ -53,7 +54,6 @@ def _wheels(context):
 
 
 def generate_launch_description():
-    sim_share = FindPackageShare("hasel_wheel_sim")
     record = include_recording(["observer_params_file", "mpc_params_file", "plant_file",
                                 "controller_model_file"])
     return LaunchDescription([
@@ -64,10 +64,8 @@ def generate_launch_description():
         DeclareLaunchArgument("wheels", default_value="1",
                               description="independent closed loops, each in its own namespace "
                                           "and on its own plant seed, all in one bag"),
-        DeclareLaunchArgument("plant_file",
-                              default_value=PathJoinSubstitution([sim_share, "config",
-                                                                  "plant_realistic.yaml"]),
-                              description="plant YAML of the simulator (seed, switching, effects)"),
+        share_file_argument("plant_file", "hasel_wheel_sim", "plant_realistic.yaml",
+                            "plant YAML of the simulator (seed, switching, effects)"),
         DeclareLaunchArgument("time_scale", default_value="1.0",
                               description="simulated seconds per wall second"),
         controller_model_argument(),

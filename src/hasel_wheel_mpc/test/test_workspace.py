@@ -123,3 +123,11 @@ def test_launch_files_name_existing_share_files():
     for f in launches:
         for sub, name in re.findall(r'"(config|launch)",\s*"([^"]+)"', f.read_text()):
             assert list(SRC.glob(f"*/{sub}/{name}")), f"{f.name}: no package has {sub}/{name}"
+    # share_file_argument(name, package, file): <package>/config/<file>
+    found = 0
+    for f in launches:
+        for pkg, name in re.findall(r'share_file_argument\(\s*"[^"]+",\s*"([^"]+)",\s*"([^"]+)"',
+                                    f.read_text()):
+            found += 1
+            assert (SRC / pkg / "config" / name).is_file(), f"{f.name}: no {pkg}/config/{name}"
+    assert found >= 5
