@@ -17,13 +17,12 @@ import math
 import shutil
 import sys
 import time
-from importlib import resources
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from hasel_wheel_sim.params import ParameterError, load_wheel_params, load_yaml_file
+from hasel_wheel_sim.params import ParameterError, load_wheel_params, load_yaml_file, packaged
 from hasel_wheel_sim.plant import load_plant_config
 from hasel_wheel_sim.trials_support import braking_fall_time, open_loop_speed
 from hasel_wheel_sim.wheel import TICK
@@ -36,11 +35,6 @@ from .trials import TrialResult, run_trial, steady_speed, trials_from_mapping
 #: (exact w_ss [rad/s], exact t90 [s], tick w_ss [rad/s]).
 NOTES_CROSS_CHECK = {1: (4.73, 26.6, 3.84), 5: (3.42, 22.5, 3.08), 9: (2.06, 16.1, 2.33),
                      11: (1.37, 9.8, 1.52)}
-
-
-def packaged(pkg: str, name: str) -> Path:
-    """Path of a default config file shipped with package ``pkg``."""
-    return Path(str(resources.files(pkg) / "config" / name))
 
 
 def _fmt(v: float | None, spec: str = "6.2f") -> str:

@@ -14,7 +14,7 @@ import pytest
 from hasel_wheel_driver import samples
 from hasel_wheel_driver.bagio import BagError, bag_configuration, read_messages
 from hasel_wheel_mpc.bag_cli import main as bag_main
-from hasel_wheel_mpc.cli import packaged
+from hasel_wheel_sim.params import packaged
 from hasel_wheel_mpc.closed_loop import run_closed_loop
 from hasel_wheel_mpc.controller import ControllerConfig
 from hasel_wheel_mpc.mpc import Mpc, MpcConfig

@@ -13,10 +13,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from importlib import resources
 from pathlib import Path
 from typing import Any, Mapping
 
 import yaml
+
+
+def packaged(pkg: str, name: str) -> Path:
+    """Path of a default config file shipped with package ``pkg`` (``<pkg>/config/<name>``)."""
+    return Path(str(resources.files(pkg) / "config" / name))
 
 
 class ParameterError(ValueError):

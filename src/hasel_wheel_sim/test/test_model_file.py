@@ -13,7 +13,7 @@ from hasel_wheel_sim.model_file import (EXTENSION_FIELDS, extensions_to_yaml_dic
                                         load_provenance, save_model)
 from hasel_wheel_sim.params import ParameterError, WheelParams, load_wheel_params
 from hasel_wheel_sim.plant import Plant, PlantConfig, plant_config_from_mapping, plant_with_model
-from hasel_wheel_mpc.cli import packaged
+from hasel_wheel_sim.params import packaged
 
 GAINS = tuple(1.0 + 0.01 * i for i in range(16))
 EXT = Extensions(com_torque=0.00398, com_phase=0.505, platform_torque=0.0021,

@@ -8,7 +8,7 @@ from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import (ParameterError, WheelParams, load_wheel_params,
                                     wheel_params_from_mapping)
 from hasel_wheel_sim.plant import plant_config_from_mapping
-from hasel_wheel_mpc.cli import packaged
+from hasel_wheel_sim.params import packaged
 
 
 def test_packaged_defaults_are_the_paper_values():
