@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -45,6 +45,9 @@ DEFAULT_ANGLES = (D(3.0), D(22.0))
 START_PERIOD = 30
 #: The start command aims at a pad whose switch-on is at least this far ahead [s] (latency).
 START_LEAD = 0.1
+#: The start pad comes from the encoder's last this many samples (angle, and speed as their
+#: slope), not from the estimate: the observer is still converging then [samples].
+START_SAMPLES = 30
 
 
 class MpcNode(Node):
@@ -98,6 +101,7 @@ class MpcNode(Node):
         self.last_ref = self.reference
         self.started = False
         self.start_pad, self.start_idle = -1, 0
+        self.encoder: deque[tuple[float, float]] = deque(maxlen=START_SAMPLES)   # (t s, angle rad)
         # diagnostics
         self.estimates = 0
         self.window_estimates = 0
@@ -169,6 +173,8 @@ class MpcNode(Node):
     # -- the loop -----------------------------------------------------------------------------
     def _on_telemetry(self, msg: WheelTelemetry) -> None:
         self.latched_seq = int(msg.last_command_sequence)
+        if not self.started:
+            self.encoder.append((msg.device_time_us * 1e-6, msg.angle))
 
     def _on_estimate(self, e: HybridStateEstimate) -> None:
         t_in = time.perf_counter()
@@ -195,7 +201,7 @@ class MpcNode(Node):
         dec = self.mpc.decide(e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref, e.disturbance,
                               (e.accel_disturbance, 0.0, 0.0))
         if not switched_on:      # idle wheel: the next pad from the estimated angle
-            n_a = self._next_pad(e, dec.command.phi_a)
+            n_a = self._next_pad(e.xi1, e.xi2, dec.command.phi_a)
             dec = dec._replace(command=dec.command._replace(n_a=n_a))
         cmd = dec.command
         t = self.get_clock().now().nanoseconds * 1e-9
@@ -219,13 +225,14 @@ class MpcNode(Node):
             self.compute.append(dec.compute_time)
             self.slack_min = min(self.slack_min, slack)
 
-    def _next_pad(self, e: HybridStateEstimate, phi_a: float, lead: float = 0.0) -> int:
-        """The first actuator whose switch-on angle is still ahead when a command arrives.
+    def _next_pad(self, angle: float, speed: float, phi_a: float, lead: float = 0.0) -> int:
+        """The first actuator whose switch-on angle is still ahead when a command arrives
+        (wheel angle [rad] and speed [rad/s] now).
 
         closed_loop takes floor(xi1 / (pi/8)) + 1, which skips a pad that is less than phi_a
         past the sector boundary; for a slow wheel that can mean coasting to a stop.
         """
-        ahead = e.xi1 + max(e.xi2, 0.0) * (self.mpc.config.deadline_margin + lead)
+        ahead = angle + max(speed, 0.0) * (self.mpc.config.deadline_margin + lead)
         return (int(math.floor((ahead - phi_a) / SECTOR)) + 1) % 16
 
     def _start(self, e: HybridStateEstimate) -> None:
@@ -240,7 +247,10 @@ class MpcNode(Node):
         """
         if 0.0 < e.activation_counter <= 2.0 * SECTOR or self.pub_cmd.get_subscription_count() == 0:
             return
-        want = self._next_pad(e, DEFAULT_ANGLES[0], START_LEAD)
+        (t0, a0), (t1, a1) = ((self.encoder[0], self.encoder[-1]) if len(self.encoder) > 1 else
+                              ((0.0, e.xi1), (0.0, e.xi1)))
+        speed = (a1 - a0) / (t1 - t0) if t1 - t0 >= 0.02 else max(e.xi2, 0.0)
+        want = self._next_pad(a1, speed, DEFAULT_ANGLES[0], START_LEAD)
         if want == self.start_pad and self.idle - self.start_idle < START_PERIOD:
             return                                          # in flight
         self.start_pad, self.start_idle = want, self.idle

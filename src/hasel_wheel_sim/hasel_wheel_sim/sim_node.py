@@ -2,7 +2,9 @@
 
 Publishes the driver's topics with the driver's types (``telemetry``, ``joint_states``,
 ``/diagnostics``) plus the ground truth ``sim/true_state``, and takes ``command`` like the
-driver does.  Runs in real time (``time_scale`` 1.0) or scaled time.
+driver does.  Runs in real time (``time_scale`` 1.0) or scaled time, from the moment its
+controller is connected, a node that publishes ``command`` and subscribes to ``telemetry`` (or
+after ``start_timeout``): until then the wheel is held at t = 0, so it does not coast to a stop before its controller is heard.
 
 The plant is ``wheel_params_file`` with ``plant_file`` (seed, switching, effects).  With
 ``model_file`` set (e.g. an identified model), the model file's parameters and extensions are
@@ -56,6 +58,11 @@ class SimNode(Node):
             "seed_offset", 0,
             int_param("added to plant_file's seed (wheel i of a multi-wheel launch: i) [1]",
                       0, 1_000_000, True)).value
+        self.start_timeout = self.declare_parameter(
+            "start_timeout", 5.0,
+            float_param("hold the wheel at t = 0 until a node that publishes commands "
+                        "subscribes to telemetry, or this long [s]; 0 = start at once", 0.0, 60.0,
+                        True)).value
         self.declare_parameter("frame_id", "wheel", text_param("frame_id of telemetry headers"))
         self.declare_parameter("diagnostics_period", 1.0,
                                float_param("period of /diagnostics [s]", 0.1, 60.0, True))
@@ -68,9 +75,11 @@ class SimNode(Node):
         pubs = create_publishers(self, (topics.TELEMETRY, topics.JOINT_STATES, topics.TRUE_STATE,
                                         topics.DIAGNOSTICS))
         self.pub_tlm, self.pub_js, self.pub_truth, self.pub_diag = pubs.values()
-        self.create_subscription(ActuationCommand, topics.COMMAND.name, self._on_command,
-                                 qos_profile(topics.COMMAND.qos))
+        self.sub_cmd = self.create_subscription(ActuationCommand, topics.COMMAND.name,
+                                                self._on_command, qos_profile(topics.COMMAND.qos))
         self.t0_ns = self.get_clock().now().nanoseconds
+        self.started = False
+        self.created = time.monotonic()
         self.create_timer(0.01, self._on_tick)
         self.create_timer(self.get_parameter("diagnostics_period").value, self._on_diagnostics)
         self.get_logger().info(f"simulating {model_file or wheel_file} with {plant_file} (seed "
@@ -95,7 +104,31 @@ class SimNode(Node):
         """Header time [s]: ROS time at start plus simulated time."""
         return self.t0_ns * 1e-9 + t
 
+    def _start(self) -> bool:
+        """True once the simulation runs.  It starts when the loop is connected (a node that
+        publishes commands, matched to our subscription, also subscribes to our telemetry; a
+        recorder's subscription alone does not count) or after start_timeout.  A wheel that
+        starts at 1 rad/s coasts to a stop within about 2 s and no pad can start it again, so
+        it must not run while DDS discovery, or a slow first step, keeps the controller's first
+        command from it.  The pacing and the header clock are anchored here, at t = 0."""
+        def nodes(infos):
+            return {(i.node_namespace, i.node_name) for i in infos}
+        connected = self.sub_cmd.get_publisher_count() > 0 and bool(
+            nodes(self.get_subscriptions_info_by_topic(self.pub_tlm.topic_name))
+            & nodes(self.get_publishers_info_by_topic(self.sub_cmd.topic_name)))
+        waited = time.monotonic() - self.created
+        if not (connected or waited >= self.start_timeout):
+            return False
+        self.started = True
+        self.t0_ns = self.get_clock().now().nanoseconds
+        self.get_logger().info(
+            "wheel started: its controller is connected" if connected else
+            f"wheel started without a controller after {waited:.1f} s (start_timeout)")
+        return True
+
     def _on_tick(self) -> None:
+        if not (self.started or self._start()):
+            return
         for out in self.core.run_until(time.monotonic()):
             t = self._stamp_time(out.t)
             if out.sample is not None:
