@@ -119,6 +119,12 @@ def run_node(factory: Any, name: str, args: Any = None) -> None:
             rclpy.spin_until_future_complete(node, finished)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RuntimeError:
+        # rclpy's RCLError "failed to initialize wait set: the given context is not valid":
+        # SIGINT's handler shut the context down while the executor was building its wait set
+        # (a known race, ros2/ros2cli#854).  That is the shutdown asked for; anything else is not.
+        if rclpy.ok():
+            raise
     finally:
         try:
             node.destroy_node()
