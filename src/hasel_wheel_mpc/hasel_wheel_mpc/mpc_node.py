@@ -9,7 +9,8 @@ current pad's).  Publishes ``command``, ``mpc_status`` (one per decision) and ``
 
 The reference [rad/s] is the parameter ``reference_speed``; a std_msgs/Float64 on the topic
 ``reference_speed`` sets that parameter (same validation), so ``ros2 topic pub`` and
-``ros2 param set`` both drive it and ``ros2 param get`` always shows the one in use.
+``ros2 param set`` both drive it and ``ros2 param get`` always shows the one in use.  The node
+publishes the reference in use on that topic (latched) whenever it changes, so the bag has it.
 """
 from __future__ import annotations
 
@@ -32,13 +33,13 @@ from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_
                                                  text_param)
 from hasel_wheel_sim.model import SECTOR
 
+from .controller import MPC_PARAMS
 from .mpc import Mpc, MpcConfig
 from .node_model import declare_controller_model
 
 D = math.radians
 #: Parameters that are MpcConfig fields of the same name (changeable at run time).
-CONFIG_PARAMS = ("brake_threshold", "terminal_weight", "time_weighted", "deadline_margin",
-                 "max_horizon")
+CONFIG_PARAMS = MPC_PARAMS
 #: (phi_a, phi_d) [rad] assumed for a latched command this node did not send (closed_loop's start).
 DEFAULT_ANGLES = (D(3.0), D(22.0))
 #: Until the first switch-on, an unconfirmed start command is sent again after this many samples.
@@ -79,6 +80,14 @@ class MpcNode(Node):
         self.declare_parameter(
             "max_horizon", cfg.max_horizon,
             float_param("longest prediction [s]", 0.1, 10.0))
+        self.declare_parameter(
+            "phi_a_min", cfg.phi_a_min,
+            float_param("actuation limit: smallest activation angle phi_a the MPC may choose "
+                        "(a smaller phi_a pushes harder) [rad]", 0.0, SECTOR))
+        self.declare_parameter(
+            "phi_a_max", cfg.phi_a_max,
+            float_param("actuation limit: largest activation angle phi_a the MPC may choose "
+                        "[rad]", 0.0, SECTOR))
         self.idle_samples = self.declare_parameter(
             "idle_samples", 150,
             int_param("decide on an idle wheel after this many samples with HV off [samples]",
@@ -115,8 +124,10 @@ class MpcNode(Node):
         self.last_status: MpcStatus | None = None
         self.last_age = math.nan
 
-        pubs = create_publishers(self, (topics.COMMAND, topics.MPC_STATUS, topics.DIAGNOSTICS))
-        self.pub_cmd, self.pub_status, self.pub_diag = pubs.values()
+        pubs = create_publishers(self, (topics.COMMAND, topics.MPC_STATUS, topics.DIAGNOSTICS,
+                                        topics.REFERENCE))
+        self.pub_cmd, self.pub_status, self.pub_diag, self.pub_ref = pubs.values()
+        self.published_ref = math.nan
         self.create_subscription(HybridStateEstimate, topics.STATE_ESTIMATE.name,
                                  self._on_estimate, qos_profile(topics.STATE_ESTIMATE.qos))
         self.create_subscription(WheelTelemetry, topics.TELEMETRY.name, self._on_telemetry,
@@ -127,6 +138,7 @@ class MpcNode(Node):
                                  qos_profile(topics.RELIABLE))
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
+        self._publish_reference()
         self.create_timer(period, self._on_diagnostics)
         self.get_logger().info(
             f"ready: MPC, reference {self.reference:g} rad/s, {len(self.mpc.cands)} coarse "
@@ -156,11 +168,22 @@ class MpcNode(Node):
         for p in params:
             if p.name == "reference_speed":
                 self.reference = float(p.value)
-                self.get_logger().info(f"reference {self.reference:g} rad/s")
+                if self.reference != self.published_ref:
+                    self.get_logger().info(f"reference {self.reference:g} rad/s")
+                self._publish_reference()
             elif p.name == "idle_samples":
                 self.idle_samples = int(p.value)
             elif p.name == "redecide_min_time":
                 self.redecide_time = float(p.value)
+
+    def _publish_reference(self) -> None:
+        """Publish the reference in use on ``reference_speed`` (latched) when it changed, so a
+        bag holds every reference the loop ran with, set by topic or by ``param set``, even
+        when a ``ros2 topic pub --once`` ended before the recorder subscribed.  This node's own
+        message comes back to it and changes nothing."""
+        if self.reference != self.published_ref:
+            self.published_ref = self.reference
+            self.pub_ref.publish(Float64(data=self.reference))
 
     def _on_reference(self, msg: Float64) -> None:
         result = self.set_parameters([Parameter("reference_speed", Parameter.Type.DOUBLE,
