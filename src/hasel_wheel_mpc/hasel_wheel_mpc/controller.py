@@ -151,7 +151,7 @@ class ControllerConfig:
 #: ROS parameters of observer_node / mpc_node that are fields of ObserverConfig / MpcConfig.
 OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_rate")
 MPC_PARAMS = ("brake_threshold", "terminal_weight", "time_weighted", "deadline_margin",
-              "max_horizon")
+              "max_horizon", "phi_a_min", "phi_a_max")
 
 
 def _node_parameters(text: str, node: str, where: str) -> dict[str, Any]:

@@ -66,6 +66,8 @@ class MpcConfig:
     terminal_weight: float = 1.0       # w_T of our terminal term [1]; 0 = none
     time_weighted: bool = True         # mean over all the cycle's samples; False = (59) exactly
     deadline_margin: float = 0.004     # the command's way to the wheel [s]
+    phi_a_min: float = 0.0             # actuation limits: driving phi_a only in [min, max] [rad]
+    phi_a_max: float = SECTOR
 
     def __post_init__(self) -> None:
         for name in ("phi_a", "phi_d", "refine_phi_d"):
@@ -78,14 +80,25 @@ class MpcConfig:
             raise ValueError("braking angles: expected -pi/8 < brake_phi_a < brake_phi_d < 0 rad")
         if self.terminal_weight < 0.0 or self.deadline_margin < 0.0 or self.max_horizon <= 0.0:
             raise ValueError("terminal_weight and deadline_margin must be >= 0, max_horizon > 0")
+        if not 0.0 <= self.phi_a_min < self.phi_a_max <= SECTOR:
+            raise ValueError(f"phi_a_min = {self.phi_a_min!r}, phi_a_max = {self.phi_a_max!r} rad: "
+                             f"expected 0 <= phi_a_min < phi_a_max <= pi/8")
+        if not self.candidates().size:
+            raise ValueError(f"no coarse phi_a candidate lies in [phi_a_min, phi_a_max] = "
+                             f"[{self.phi_a_min!r}, {self.phi_a_max!r}] rad (candidates: "
+                             f"{', '.join(f'{a:.4f}' for a in self.phi_a)} rad)")
+
+    def _allowed(self, phi_a: float) -> bool:
+        return self.phi_a_min <= phi_a <= self.phi_a_max and 0.0 < phi_a < SECTOR
 
     def candidates(self) -> np.ndarray:
-        """(n, 2) array of the coarse pass's (phi_a, phi_d) [rad] with phi_a < phi_d."""
-        return _pairs(self.phi_a, self.phi_d)
+        """(n, 2) array of the coarse pass's (phi_a, phi_d) [rad] with phi_a < phi_d and
+        phi_a within [phi_a_min, phi_a_max]."""
+        return _pairs([a for a in self.phi_a if self._allowed(a)], self.phi_d)
 
     def refinement(self, phi_a: float) -> np.ndarray:
         """(m, 2) array of the fine pass around a coarse winner ``phi_a`` [rad]."""
-        return _pairs([phi_a + o for o in self.refine_phi_a if 0.0 < phi_a + o < SECTOR],
+        return _pairs([phi_a + o for o in self.refine_phi_a if self._allowed(phi_a + o)],
                       self.refine_phi_d)
 
 
@@ -226,7 +239,6 @@ class Mpc:
     def __init__(self, params: WheelParams | None = None, extensions: Extensions | None = None,
                  config: MpcConfig | None = None, clock=time.perf_counter) -> None:
         self.config = config or MpcConfig()
-        self.cands = self.config.candidates()
         self.pv = param_vector(params or WheelParams(), extensions)
         self._base = initial_state(mode="tick")
         self.clock = clock
@@ -237,6 +249,17 @@ class Mpc:
         self.last_drive = (mid, max(self.config.phi_d))
         # load the compiled predictor now, so the first real decision is not the slow one
         self._costs(initial_state(mode="tick"), self.pv, self.cands[:1], 2, 1.0, 0.0)
+
+    @property
+    def config(self) -> MpcConfig:
+        """The configuration in use; setting it (e.g. a run-time parameter change) also
+        recomputes the coarse candidates."""
+        return self._config
+
+    @config.setter
+    def config(self, config: MpcConfig) -> None:
+        self._config = config
+        self.cands = config.candidates()
 
     def decide(self, xi1: float, xi2: float, eta_unwrapped: int, phi_a_now: float,
                phi_d_now: float, reference: float, d: float = 0.0,

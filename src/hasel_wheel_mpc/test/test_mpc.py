@@ -1,5 +1,6 @@
 """MPC core: the cost (59) on a hand-checkable case, braking selection, the fallback when no
 candidate completes its cycle, and a short closed loop on the nominal plant."""
+import dataclasses
 import math
 
 import numpy as np
@@ -146,5 +147,29 @@ def test_refinement_searches_phi_a_and_phi_d_jointly_around_the_coarse_winner():
                                        ({"brake_threshold": 0.0}, "brake_threshold"),
                                        ({"brake_phi_a": D(-3), "brake_phi_d": D(-6)}, "braking")])
 def test_bad_configurations_are_refused(kw, match):
+    with pytest.raises(ValueError, match=match):
+        MpcConfig(**kw)
+
+
+def test_actuation_limits_bound_every_chosen_phi_a_and_apply_when_changed():
+    # a slow wheel far below the reference wants the strongest push (smallest phi_a); with
+    # phi_a limited to [5, 8] deg the choice is the bound, refinement included
+    mpc = Mpc()
+    free = mpc.decide(1 * SECTOR + D(3), 0.65, 1, D(3), D(22), reference=2.0)
+    assert free.command.phi_a < D(5)
+    mpc.config = dataclasses.replace(mpc.config, phi_a_min=D(5), phi_a_max=D(8))
+    assert len(mpc.cands) == 4                              # 5, 6, 7, 8 deg
+    bound = mpc.decide(1 * SECTOR + D(3), 0.65, 1, D(3), D(22), reference=2.0)
+    assert bound.command.phi_a == pytest.approx(D(5))
+    assert all(D(5) - 1e-12 <= a <= D(8) + 1e-12 for a in mpc.config.refinement(D(5))[:, 0])
+    # a fast wheel above target wants a weak push; the upper bound caps it
+    weak = mpc.decide(1 * SECTOR + D(3), 1.9, 1, D(8), D(22), reference=1.8)
+    assert D(5) <= weak.command.phi_a <= D(8)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"phi_a_min": D(9), "phi_a_max": D(8)}, r"expected 0 <= phi_a_min < phi_a_max <= pi/8"),
+    ({"phi_a_min": D(5.2), "phi_a_max": D(5.8)}, r"no coarse phi_a candidate lies in")])
+def test_bad_actuation_limits_are_refused_with_the_range(kw, match):
     with pytest.raises(ValueError, match=match):
         MpcConfig(**kw)
