@@ -17,7 +17,7 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     # lower bounds only, so that Ubuntu 24.04 / ROS 2 Jazzy system packages satisfy them
-    install_requires=["setuptools", "PyYAML>=5.4", "mcap>=1.1", "mcap-ros2-support>=0.5", "pyserial>=3.4", "cobs>=1.1",
+    install_requires=["setuptools", "numpy>=1.24", "PyYAML>=5.4", "mcap>=1.1", "mcap-ros2-support>=0.5", "pyserial>=3.4", "cobs>=1.1",
                       "tqdm>=4.60"],
     extras_require={"parquet": ["pyarrow>=15"],   # bag export --format parquet
                     "test": ["pytest"]},          # colcon test runs pytest (not unittest)

@@ -18,8 +18,9 @@ setup(
     ],
     # lower bounds only, so that Ubuntu 24.04 / ROS 2 Jazzy system packages satisfy them
     install_requires=["setuptools", "numpy>=1.24", "scipy>=1.10", "PyYAML>=5.4",
-                      "threadpoolctl>=3.1", "hasel_wheel_driver", "hasel_wheel_sim"],
-    extras_require={"test": ["pytest"]},      # colcon test runs pytest (not unittest)
+                      "matplotlib>=3.6", "hasel_wheel_driver", "hasel_wheel_sim"],
+    extras_require={"threads": ["threadpoolctl>=3.1"],   # optional: one BLAS thread in fits
+                    "test": ["pytest"]},      # colcon test runs pytest (not unittest)
     zip_safe=False,
     maintainer="HASEL wheel developers",
     maintainer_email="dev@hasel-wheel.invalid",
