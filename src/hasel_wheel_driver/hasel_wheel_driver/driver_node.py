@@ -13,6 +13,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, WheelTelemetry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from hasel_wheel_driver import samples, topics
@@ -35,8 +36,14 @@ class DriverNode(Node):
         timeout = self.declare_parameter(
             "link_timeout", 0.25,
             float_param("no telemetry this long = stale link: ESTOP + HV off [s]", 0.05, 5.0, True)).value
-        self.declare_parameter("hv_enabled", False,
-                               text_param("request HV on (true) or off (false)", read_only=False))
+        hv_at_start = self.declare_parameter(
+            "hv_enabled", False,
+            text_param("request HV on (true) or off (false); always off at start-up",
+                       read_only=False)).value
+        if hv_at_start is not False:       # from a parameter file or --ros-args: not at start-up
+            self.set_parameters([Parameter("hv_enabled", Parameter.Type.BOOL, False)])
+            self.get_logger().warn(f"hv_enabled = {hv_at_start!r} at start-up ignored: HV stays "
+                                   f"off until 'ros2 param set <node> hv_enabled true'")
         self.declare_parameter("frame_id", "wheel", text_param("frame_id of telemetry headers"))
         period = self.declare_parameter(
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0, True)).value
@@ -50,6 +57,7 @@ class DriverNode(Node):
         self.core = DriverCore(LinkConfig(port, heartbeat_period=hb, link_timeout=timeout),
                                on_sample=self._on_sample, on_event=self._on_event)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
         self.create_timer(period, self._on_diagnostics)
         self.core.start()
         self.get_logger().info(f"serial link on {port}; HV stays off until hv_enabled is true")
@@ -59,10 +67,14 @@ class DriverNode(Node):
             if p.name == "hv_enabled":
                 if not isinstance(p.value, bool):
                     return SetParametersResult(successful=False, reason="hv_enabled must be true or false")
+        return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, params) -> None:
+        for p in params:
+            if p.name == "hv_enabled":
                 if p.value:
                     self.core.clear_estop()
                 self.core.set_hv(p.value)
-        return SetParametersResult(successful=True)
 
     def _on_sample(self, s: samples.TelemetrySample) -> None:
         # runs in the link thread; stamp with the ROS time of arrival

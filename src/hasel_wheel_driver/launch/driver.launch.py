@@ -1,6 +1,6 @@
 """Launch the real wheel's driver: ros2 launch hasel_wheel_driver driver.launch.py port:=/dev/serial/by-id/..."""
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
@@ -18,5 +18,6 @@ def generate_launch_description():
                               description="ROS parameter file of driver_node"),
         Node(package="hasel_wheel_driver", executable="driver_node", name="driver",
              namespace=LaunchConfiguration("namespace"), output="screen",
+             on_exit=Shutdown(reason="the driver exited"),   # no controller left without it
              parameters=[LaunchConfiguration("params_file"), {"port": LaunchConfiguration("port")}]),
     ])

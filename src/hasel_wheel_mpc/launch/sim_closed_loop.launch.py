@@ -4,14 +4,16 @@
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py controller_model_file:=out/identify/model.yaml
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py bag_dir:=bags/run1   # or record:=false
     ros2 launch hasel_wheel_mpc sim_closed_loop.launch.py wheels:=4 time_scale:=0.5   # /wheel0..3
-    ros2 topic pub --once reference_speed std_msgs/msg/Float64 "{data: 1.5}"
-    ros2 param set /mpc_node reference_speed 2.0
+    ros2 topic pub --once /wheel0/reference_speed std_msgs/msg/Float64 "{data: 1.5}"
+    ros2 param set /wheel0/mpc_node reference_speed 2.0
 
 The observer and the MPC start first; the simulator (hasel_wheel_sim's sim.launch.py, on the
 plant with realistic effects unless plant_file:=... says otherwise) starts once both have
-logged "ready:".  The simulated wheel starts at 1 rad/s and coasts to a stop within about 2 s
-without commands, and a stopped wheel cannot be started; loading (or on the first run,
-compiling) the model takes the nodes longer than that on a small machine.
+logged "ready:", and holds its wheel at t = 0 until its controller is connected (the MPC
+node, which publishes command and subscribes to telemetry).  The simulated wheel starts at 1 rad/s and
+coasts to a stop within about 2 s without commands, and a stopped wheel cannot be started;
+loading (or on the first run, compiling) the model takes the nodes longer than that on a
+small machine.
 
 Every topic is recorded to an MCAP bag (record.launch.py) with the parameter files, the plant
 file (its seed) and the controller's model file in the bag's custom data.
@@ -58,7 +60,7 @@ def generate_launch_description():
                                 "controller_model_file"])
     return LaunchDescription([
         *recording_arguments(),
-        DeclareLaunchArgument("namespace", default_value="",
+        DeclareLaunchArgument("namespace", default_value="wheel0",
                               description="namespace of the wheel's topics and nodes ('' = "
                                           "root); with wheels > 1: wheel0, wheel1, ..."),
         DeclareLaunchArgument("wheels", default_value="1",

@@ -32,7 +32,8 @@ def generate_launch_description():
              on_exit=Shutdown(reason="the simulated wheel exited"),
              parameters=[LaunchConfiguration("params_file"),
                          {"plant_file": LaunchConfiguration("plant_file"),
-                          "time_scale": LaunchConfiguration("time_scale"),
+                          "time_scale": ParameterValue(LaunchConfiguration("time_scale"),
+                                                       value_type=float),   # time_scale:=2 too
                           "seed_offset": ParameterValue(LaunchConfiguration("seed_offset"),
                                                         value_type=int),
                           "model_file": ParameterValue(LaunchConfiguration("model_file"),
