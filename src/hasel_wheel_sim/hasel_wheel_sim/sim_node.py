@@ -80,6 +80,8 @@ class SimNode(Node):
         self.t0_ns = self.get_clock().now().nanoseconds
         self.started = False
         self.created = time.monotonic()
+        self.published = 0                     # telemetry samples in this diagnostics window
+        self.window_t0 = self.created
         self.create_timer(0.01, self._on_tick)
         self.create_timer(self.get_parameter("diagnostics_period").value, self._on_diagnostics)
         self.get_logger().info(f"simulating {model_file or wheel_file} with {plant_file} (seed "
@@ -135,17 +137,27 @@ class SimNode(Node):
                 s = out.sample
                 host = s._replace(t=self._stamp_time(s.t))
                 self.pub_tlm.publish(fill(WheelTelemetry(), samples.telemetry_msg(host, self.frame_id)))
+                self.published += 1
                 self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
             x = out.truth
             self.pub_truth.publish(fill(HybridStateEstimate(), samples.state_msg(
                 t, x.xi1, x.xi2, x.q, x.act_counter, x.deact_counter, x.eta)))
 
     def _on_diagnostics(self) -> None:
+        now = time.monotonic()
         d = self.core.diagnostics()
-        level = DiagnosticStatus.WARN[0] if self.core.commands_rejected or self.core.overruns \
-            else DiagnosticStatus.OK[0]
-        publish_status(self, self.pub_diag, "simulator", "hasel_wheel_sim", level,
-                       "simulating", d)
+        d["telemetry_rate_hz"] = f"{self.published / max(now - self.window_t0, 1e-9):.1f}"
+        d["started"] = str(self.started)
+        self.published, self.window_t0 = 0, now
+        if not self.started:
+            level, text = DiagnosticStatus.WARN[0], "waiting for the controller (wheel at t = 0)"
+        elif self.core.commands_rejected or self.core.overruns:
+            level, text = DiagnosticStatus.WARN[0], (
+                f"simulating; {self.core.commands_rejected} commands rejected, "
+                f"{self.core.overruns} overruns (the timer fell behind) so far")
+        else:
+            level, text = DiagnosticStatus.OK[0], "simulating"
+        publish_status(self, self.pub_diag, "simulator", "hasel_wheel_sim", level, text, d)
 
 
 def main(args=None):
