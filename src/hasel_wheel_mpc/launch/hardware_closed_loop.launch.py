@@ -4,16 +4,19 @@
         port:=/dev/serial/by-id/usb-Teensyduino_USB_Serial_12345-if00 bag_dir:=bags/run1
     ros2 param set /wheel0/driver hv_enabled true          # HV stays off until you ask
     ros2 topic pub --once /wheel0/reference_speed std_msgs/msg/Float64 "{data: 1.5}"
+    ros2 launch hasel_wheel_mpc hardware_closed_loop.launch.py \\
+        ports:=/dev/serial/by-id/usb-...-A-if00,/dev/serial/by-id/usb-...-B-if00   # /wheel0, /wheel1
 
 The observer and the MPC start first; the driver (hasel_wheel_driver's driver.launch.py)
-starts once both have logged "ready:", so the first telemetry finds them loaded.  The driver
+starts once both have logged "ready:" (per wheel, with ports:=...), so the first telemetry
+finds them loaded.  The driver
 keeps high voltage off until ``hv_enabled`` is set true, and switches it off again when the
 link goes quiet, a command is rejected or the launch stops.  Every topic is recorded to an
 MCAP bag (record.launch.py) with the driver's, observer's and MPC's parameter files in the
 bag's custom data; record:=false turns recording off.
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription
+from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.substitutions import FindPackageShare
@@ -24,15 +27,30 @@ from hasel_wheel_mpc.launch_support import (controller_model_argument, controlle
                                            when_all_ready)
 
 
+def _wheels(context):
+    """Each wheel's driver, observer and MPC: one wheel on ``port`` under ``namespace``, or
+    one per entry of ``ports`` (comma-separated) under wheel0, wheel1, ..."""
+    ports = [p.strip() for p in LaunchConfiguration("ports").perform(context).split(",")
+             if p.strip()]
+    if len(set(ports)) != len(ports):
+        raise ValueError(f"ports:={','.join(ports)}: a serial device is named twice")
+    wheels = ([(LaunchConfiguration("namespace").perform(context),
+                LaunchConfiguration("port").perform(context))] if not ports else
+              [(f"wheel{i}", port) for i, port in enumerate(ports)])
+    driver_launch = PathJoinSubstitution([FindPackageShare("hasel_wheel_driver"), "launch",
+                                          "driver.launch.py"])
+    actions = []
+    for ns, port in wheels:
+        observer, mpc = controller_nodes(ns)
+        driver = IncludeLaunchDescription(
+            PythonLaunchDescriptionSource(driver_launch),
+            launch_arguments={"namespace": ns, "port": port,
+                              "params_file": LaunchConfiguration("driver_params_file")}.items())
+        actions += [*when_all_ready([observer, mpc], [driver]), observer, mpc]
+    return actions
+
+
 def generate_launch_description():
-    driver_share = FindPackageShare("hasel_wheel_driver")
-    namespace = LaunchConfiguration("namespace")
-    observer, mpc = controller_nodes(namespace)
-    driver = IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(PathJoinSubstitution([driver_share, "launch",
-                                                            "driver.launch.py"])),
-        launch_arguments={"namespace": namespace, "port": LaunchConfiguration("port"),
-                          "params_file": LaunchConfiguration("driver_params_file")}.items())
     record = include_recording(["driver_params_file", "observer_params_file", "mpc_params_file",
                                 "controller_model_file"])
     return LaunchDescription([
@@ -42,12 +60,14 @@ def generate_launch_description():
         DeclareLaunchArgument("port", default_value="/dev/ttyACM0",
                               description="the Teensy's serial device (a /dev/serial/by-id/... "
                                           "name survives replugging)"),
+        DeclareLaunchArgument("ports", default_value="",
+                              description="several wheels: their serial devices, comma-separated; "
+                                          "wheel i under /wheel<i> (then port and namespace are "
+                                          "not used)"),
         share_file_argument("driver_params_file", "hasel_wheel_driver", "driver_node.yaml",
                             "ROS parameter file of the driver"),
         controller_model_argument(),
         *controller_parameter_arguments(),
-        *when_all_ready([observer, mpc], [driver]),
         record,
-        observer,
-        mpc,
+        OpaqueFunction(function=_wheels),
     ])
