@@ -39,8 +39,9 @@ def _plant_and_trial(context):
         source = PathJoinSubstitution([FindPackageShare("hasel_wheel_sim"), "launch",
                                        "sim.launch.py"])
         arguments = {"namespace": namespace, "plant_file": LaunchConfiguration("plant_file"),
+                     "params_file": LaunchConfiguration("sim_params_file"),
                      "time_scale": LaunchConfiguration("time_scale")}
-        kept = ["trial_params_file", "plant_file"]
+        kept = ["trial_params_file", "sim_params_file", "plant_file"]
     else:
         source = PathJoinSubstitution([FindPackageShare("hasel_wheel_driver"), "launch",
                                        "driver.launch.py"])
@@ -63,6 +64,8 @@ def generate_launch_description():
                             "ROS parameter file of trial_node (the steps)"),
         share_file_argument("plant_file", "hasel_wheel_sim", "plant_realistic.yaml",
                             "plant:=sim: plant YAML of the simulator"),
+        share_file_argument("sim_params_file", "hasel_wheel_sim", "sim_node.yaml",
+                            "plant:=sim: ROS parameter file of the simulator (initial speed)"),
         DeclareLaunchArgument("time_scale", default_value="1.0",
                               description="plant:=sim: simulated seconds per wall second"),
         DeclareLaunchArgument("port", default_value="/dev/ttyACM0",

@@ -47,6 +47,7 @@ def _wheels(context):
             PythonLaunchDescriptionSource(PathJoinSubstitution([sim_share, "launch",
                                                                 "sim.launch.py"])),
             launch_arguments={"namespace": ns,
+                              "params_file": LaunchConfiguration("sim_params_file"),
                               "plant_file": LaunchConfiguration("plant_file"),
                               "time_scale": LaunchConfiguration("time_scale"),
                               "seed_offset": str(i),
@@ -56,8 +57,8 @@ def _wheels(context):
 
 
 def generate_launch_description():
-    record = include_recording(["observer_params_file", "mpc_params_file", "plant_file",
-                                "controller_model_file"])
+    record = include_recording(["observer_params_file", "mpc_params_file", "sim_params_file",
+                                "plant_file", "controller_model_file"])
     return LaunchDescription([
         *recording_arguments(),
         DeclareLaunchArgument("namespace", default_value="wheel0",
@@ -68,6 +69,8 @@ def generate_launch_description():
                                           "and on its own plant seed, all in one bag"),
         share_file_argument("plant_file", "hasel_wheel_sim", "plant_realistic.yaml",
                             "plant YAML of the simulator (seed, switching, effects)"),
+        share_file_argument("sim_params_file", "hasel_wheel_sim", "sim_node.yaml",
+                            "ROS parameter file of the simulator (initial speed, start_timeout)"),
         DeclareLaunchArgument("time_scale", default_value="1.0",
                               description="simulated seconds per wall second"),
         controller_model_argument(),
