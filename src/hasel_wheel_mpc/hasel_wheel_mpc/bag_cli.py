@@ -3,6 +3,8 @@
     hasel_wheel bag info out/demo/demo_bag         # topics, counts, rates, gaps, configuration
     hasel_wheel bag info killed_run/ --json        # the same as JSON
     hasel_wheel bag metrics out/demo/bag           # per wheel and reference segment
+    hasel_wheel bag observer out/demo/bag          # observer speed error vs the true speed
+    hasel_wheel bag observer replay_bag --truth run_bag   # a replay's estimates vs the run's truth
     hasel_wheel bag export out/demo/bag --out csv/ --topics /wheel0/telemetry   # CSV per topic
     hasel_wheel bag export out/demo/bag --out pq/ --format parquet              # Parquet
     hasel_wheel bag plot out/demo/bag --out plots/ # speed, raster, force, observer (PNG)
@@ -77,6 +79,19 @@ def cmd_metrics(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_observer(args: argparse.Namespace) -> int:
+    """Print the observer's speed error against the simulator's true speed."""
+    from .observer_error import observer_error
+    try:
+        wheels = observer_error(args.bag, args.truth, args.skip)
+    except BagError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for w in wheels:
+        print(w.text())
+    return 0
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     """Write chosen topics as CSV or Parquet files, one per topic."""
     topics = [t.strip() for t in args.topics.split(",") if t.strip()] if args.topics else None
@@ -133,7 +148,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def add_parsers(sub) -> None:
     """Add ``bag`` (``info``, ``metrics``, ``plot``, ``export``, ``replay``) to the ``hasel_wheel`` sub-command parser."""
-    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, plot, export, replay)")
+    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, observer, "
+                                    "plot, export, replay)")
     add_tools(b.add_subparsers(dest="bag_command", required=True))
 
 
@@ -150,6 +166,15 @@ def add_tools(tools) -> None:
                    help="[s] steady window at the end of each segment (default 10)")
     m.add_argument("--json", action="store_true", help="print JSON instead of text")
     m.set_defaults(func=cmd_metrics)
+    o = tools.add_parser("observer", help="the observer's speed error against the simulator's "
+                                          "true speed, estimates paired by stamp")
+    o.add_argument("bag", help="bag with state_estimate (directory or .mcap file)")
+    o.add_argument("--truth", default=None,
+                   help="bag with sim/true_state (default: the same bag; e.g. the original run "
+                        "of a replay)")
+    o.add_argument("--skip", type=float, default=2.0,
+                   help="[s] left out after the first paired estimate (acquisition; default 2)")
+    o.set_defaults(func=cmd_observer)
     e = tools.add_parser("export", help="chosen topics as CSV or Parquet, one file per topic")
     e.add_argument("bag", help="bag directory or .mcap file")
     e.add_argument("--out", required=True, help="directory for the files")
