@@ -65,6 +65,19 @@ def share_file_argument(name: str, package: str, filename: str,
         default_value=PathJoinSubstitution([FindPackageShare(package), "config", filename]))
 
 
+def sim_arguments(prefix: str = "") -> list:
+    """The simulator's launch arguments ``plant_file`` (the realistic plant by default),
+    ``sim_params_file`` and ``time_scale``; ``prefix`` starts each description (e.g.
+    'plant:=sim: ')."""
+    return [share_file_argument("plant_file", "hasel_wheel_sim", "plant_realistic.yaml",
+                                prefix + "plant YAML of the simulator (seed, switching, effects)"),
+            share_file_argument("sim_params_file", "hasel_wheel_sim", "sim_node.yaml",
+                                prefix + "ROS parameter file of the simulator (initial speed, "
+                                         "start_timeout)"),
+            DeclareLaunchArgument("time_scale", default_value="1.0",
+                                  description=prefix + "simulated seconds per wall second")]
+
+
 def controller_parameter_arguments() -> list:
     """The ``observer_params_file`` and ``mpc_params_file`` launch arguments."""
     return [share_file_argument(f"{name}_params_file", "hasel_wheel_mpc", f"{name}.yaml",

@@ -22,7 +22,8 @@ from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
 from hasel_wheel_mpc.launch_support import (include_recording, recording_arguments,
-                                           share_file_argument, when_all_ready)
+                                           share_file_argument, sim_arguments,
+                                           when_all_ready)
 
 PLANTS = ("sim", "hardware")
 
@@ -62,12 +63,7 @@ def generate_launch_description():
                               description="namespace of the wheel's topics and nodes"),
         share_file_argument("trial_params_file", "hasel_wheel_mpc", "open_loop_trial.yaml",
                             "ROS parameter file of trial_node (the steps)"),
-        share_file_argument("plant_file", "hasel_wheel_sim", "plant_realistic.yaml",
-                            "plant:=sim: plant YAML of the simulator"),
-        share_file_argument("sim_params_file", "hasel_wheel_sim", "sim_node.yaml",
-                            "plant:=sim: ROS parameter file of the simulator (initial speed)"),
-        DeclareLaunchArgument("time_scale", default_value="1.0",
-                              description="plant:=sim: simulated seconds per wall second"),
+        *sim_arguments("plant:=sim: "),
         DeclareLaunchArgument("port", default_value="/dev/ttyACM0",
                               description="plant:=hardware: the Teensy's serial device"),
         share_file_argument("driver_params_file", "hasel_wheel_driver", "driver_node.yaml",

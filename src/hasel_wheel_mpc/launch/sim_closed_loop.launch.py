@@ -26,8 +26,7 @@ from launch_ros.substitutions import FindPackageShare
 
 from hasel_wheel_mpc.launch_support import (controller_model_argument, controller_nodes,
                                            controller_parameter_arguments, include_recording,
-                                           recording_arguments, share_file_argument,
-                                           when_all_ready)
+                                           recording_arguments, sim_arguments, when_all_ready)
 
 
 def _wheels(context):
@@ -67,12 +66,7 @@ def generate_launch_description():
         DeclareLaunchArgument("wheels", default_value="1",
                               description="independent closed loops, each in its own namespace "
                                           "and on its own plant seed, all in one bag"),
-        share_file_argument("plant_file", "hasel_wheel_sim", "plant_realistic.yaml",
-                            "plant YAML of the simulator (seed, switching, effects)"),
-        share_file_argument("sim_params_file", "hasel_wheel_sim", "sim_node.yaml",
-                            "ROS parameter file of the simulator (initial speed, start_timeout)"),
-        DeclareLaunchArgument("time_scale", default_value="1.0",
-                              description="simulated seconds per wall second"),
+        *sim_arguments(),
         controller_model_argument(),
         DeclareLaunchArgument("plant_model_file", default_value="",
                               description="model file as the simulated plant's dynamics (then "
