@@ -1,15 +1,9 @@
 """Tests that start ROS 2 nodes run only in a loopback-only network namespace."""
 import importlib.util
-import socket
 
-from hasel_wheel_driver.ros_sandbox import network_interfaces, ros_graph_unavailable
+from hasel_wheel_driver.ros_sandbox import ros_graph_unavailable
 
 LOCAL = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}
-
-
-def test_interfaces_are_this_namespace_s():
-    assert network_interfaces() == sorted(n for _, n in socket.if_nameindex())
-    assert "lo" in network_interfaces()
 
 
 def test_another_interface_keeps_ros_tests_off():
