@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from hasel_wheel_sim import layout as L
-from hasel_wheel_sim.jit import jit, jit_inline
+from hasel_wheel_sim.jit import jit, jit_inline, jit_kernel
 from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, acceleration
 
 
@@ -46,7 +46,7 @@ def _rk4(x1: float, x2: float, h: float, q: float, eta: float, phi_a: float, gai
     return n1, n2
 
 
-@jit
+@jit_kernel
 def shoot_windows(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
                   on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray,
                   windows: np.ndarray, x0: np.ndarray, pv: np.ndarray, out1: np.ndarray,
