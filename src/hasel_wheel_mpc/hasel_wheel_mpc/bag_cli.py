@@ -108,7 +108,8 @@ def cmd_export(args: argparse.Namespace) -> int:
     return 0 if report else 1
 
 
-def _override(text: str) -> tuple[str, object]:
+def override_arg(text: str) -> tuple[str, object]:
+    """argparse type of ``--set SECTION.FIELD=VALUE``: (key, YAML-parsed value)."""
     key, sep, value = text.partition("=")
     if not sep or not key.strip():
         raise argparse.ArgumentTypeError(f"{text!r}: expected SECTION.FIELD=VALUE, e.g. "
@@ -195,7 +196,7 @@ def add_tools(tools) -> None:
     r.add_argument("bag", help="bag directory or .mcap file")
     r.add_argument("--namespace", action="append", default=None,
                    help="wheel namespace to replay, e.g. /wheel0 (repeatable; default: all)")
-    r.add_argument("--set", action="append", type=_override, metavar="SECTION.FIELD=VALUE",
+    r.add_argument("--set", action="append", type=override_arg, metavar="SECTION.FIELD=VALUE",
                    help="change the recorded controller configuration (repeatable), e.g. "
                         "mpc.brake_threshold=0.2, observer.accel_noise=0.1, estimator.gain=null, "
                         "model.wheel.tau_f=1.2")

@@ -82,6 +82,7 @@ def _fresh_bag_dir(out: Path) -> Path | None:
 
 def cmd_demo(args: argparse.Namespace) -> int:
     """Closed-loop demo: run, record, plot, print the metrics beside the paper's."""
+    from .closed_loop import controller_config
     from .closed_loop_demo import VARIANTS, metrics_table, plot, run_variants
 
     plant_cfg = dataclasses.replace(load_plant_config(args.plant), switching="tick")
@@ -91,6 +92,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.wheels < 1:
         print(f"error: --wheels {args.wheels}: expected at least 1", file=sys.stderr)
         return 2
+    controller_config().with_overrides(dict(args.set or []))     # refuse a bad --set early
     out = Path(args.out)
     bag_dir = _fresh_bag_dir(out)
     if bag_dir is None:
@@ -99,11 +101,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
                                          "seed": str(plant_cfg.seed),
                                          "plant.yaml": Path(args.plant).read_text(),
                                          "hold_scale": repr(args.hold_scale),
-                                         "wheels": str(args.wheels)})
+                                         "wheels": str(args.wheels),
+                                         "controller_overrides": repr(dict(args.set or []))})
     variants = VARIANTS if args.compare else VARIANTS[:1]
     t0 = time.perf_counter()
     try:
-        results = run_variants(plant_cfg, args.hold_scale, variants, rec, args.wheels)
+        results = run_variants(plant_cfg, args.hold_scale, variants, rec, args.wheels,
+                               dict(args.set or []))
     finally:
         rec.close()
     wall = time.perf_counter() - t0
@@ -242,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "under /wheel<i> (default 1)")
     c.add_argument("--no-compare", dest="compare", action="store_false",
                    help="skip the comparison runs (no estimator, paper estimator, finite difference)")
+    c.add_argument("--set", action="append", type=bag_cli.override_arg,
+                   metavar="SECTION.FIELD=VALUE", help="change the controller of every run (repeatable), e.g. "
+                        "mpc.brake_phi_a=-0.384 (rad) or mpc.brake_threshold=0.2 (rad/s)")
     c.set_defaults(func=cmd_demo)
     d = sub.add_parser("table2", help="open-loop trials vs. paper Table II, recorded to a bag")
     d.add_argument("--out", default="out/table2", help="output directory (default: out/table2)")

@@ -16,7 +16,7 @@ import numpy as np
 
 from . import paper
 from .closed_loop import (FIG11_DURATION, FIG11_PROFILE, LoopLog, WheelLoop, controller_config,
-                          run_closed_loop, run_wheels, segment_metrics)
+                          run_controller, run_wheels, segment_metrics)
 
 #: (label, keyword arguments of run_closed_loop) of the comparison runs.
 VARIANTS = (
@@ -39,19 +39,22 @@ def scaled_profile(scale: float):
 
 
 def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=None,
-                 wheels: int = 1):
+                 wheels: int = 1, overrides: dict | None = None):
     """Run each variant on the scaled profile; the first is recorded (if ``recorder``).
 
     With ``wheels`` > 1 the first variant runs that many wheels in lockstep, wheel i on the
     plant with seed ``plant_config.seed + i``, each recorded under ``/wheel<i>``; the
     results (one per variant) are wheel 0's, and the other wheels' results follow them as
-    ``"<label>, /wheel<i>"``.
+    ``"<label>, /wheel<i>"``.  ``overrides`` ({'mpc.brake_phi_a': -0.384, ...}, see
+    ``ControllerConfig.with_overrides``) change every variant's controller.
     """
     profile, duration = scaled_profile(scale)
     out, extra = [], []
     for i, (label, kw) in enumerate(variants):
+        cfg = controller_config(**kw)
+        if overrides:
+            cfg = cfg.with_overrides(overrides)
         if i == 0:
-            cfg = controller_config(**kw)
             loops = [WheelLoop(cfg, profile, dataclasses.replace(plant_config,
                                                                  seed=plant_config.seed + k),
                                recorder=recorder, ns=f"/wheel{k}")
@@ -61,7 +64,7 @@ def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=N
             extra = [VariantResult(f"{label}, /wheel{k}", lg, segment_metrics(lg, profile, duration))
                      for k, lg in enumerate(logs[1:], start=1)]
         else:
-            log = run_closed_loop(profile, duration, plant_config=plant_config, **kw)
+            log = run_controller(cfg, profile, duration, plant_config)
         out.append(VariantResult(label, log, segment_metrics(log, profile, duration)))
     return out + extra
 

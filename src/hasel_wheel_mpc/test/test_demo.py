@@ -8,6 +8,7 @@ import yaml
 from rosbags.highlevel import AnyReader
 
 from hasel_wheel_mpc import cli, paper
+from hasel_wheel_mpc.controller import ControllerConfig
 
 
 @pytest.fixture(scope="module")
@@ -144,12 +145,14 @@ def test_closed_loop_demo_runs_n_wheels_each_under_its_namespace(tmp_path, capsy
     from hasel_wheel_mpc.bag_metrics import bag_metrics
     out = tmp_path / "two"
     assert cli.main(["demo", "--out", str(out), "--hold-scale", "0.08", "--no-compare",
-                     "--wheels", "2"]) == 0
+                     "--wheels", "2", "--set", "mpc.brake_phi_d=-0.12"]) == 0
     text = capsys.readouterr().out
     assert "with estimator (tracking), /wheel1:" in text
     bag = out / "bag"
     cfg = bag_configuration(bag)
     assert {"/wheel0/controller.yaml", "/wheel1/controller.yaml"} <= set(cfg)
+    for ns in ("/wheel0", "/wheel1"):          # --set reached every wheel's controller
+        assert ControllerConfig.from_yaml(cfg[f"{ns}/controller.yaml"]).mpc.brake_phi_d == -0.12
     assert cfg["wheels"] == "2"
     assert [w.namespace for w in bag_metrics(bag)] == ["/wheel0", "/wheel1"]
     angles = {"/wheel0/telemetry": [], "/wheel1/telemetry": []}
@@ -163,6 +166,13 @@ def test_closed_loop_demo_runs_n_wheels_each_under_its_namespace(tmp_path, capsy
     assert cli.main(["bag", "replay", str(bag), "--check"]) == 0
     assert capsys.readouterr().out.count("IDENTICAL") == 2
     assert cli.main(["demo", "--out", str(tmp_path / "o"), "--wheels", "0"]) == 2
+
+
+def test_closed_loop_demo_refuses_an_unknown_override_before_writing(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert cli.main(["demo", "--out", str(out), "--set", "mpc.brake_angle=-0.3"]) == 2
+    assert "no field 'brake_angle'; known: ['brake_phi_a'" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_closed_loop_demo_refuses_a_bad_hold_scale(tmp_path, capsys):
