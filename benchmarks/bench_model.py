@@ -130,9 +130,9 @@ def main() -> None:
     tick_ns = 1e9 / rates[256] / 300
     bare_ns = 1e9 / bare / 300
     print(f"  where a tick goes at N = 256        : {tick_ns:8.0f} ns per wheel-tick in all; without the force")
-    print(f"  law (bookkeeping only: {bare:6.0f} wheel-s per wall-s) {bare_ns:5.0f} ns; one log + exp + sin costs"
-          f" {ns:.1f} ns,")
-    print(f"  and an RK4 step evaluates the force law 4 times while an actuator is on (~half the time)")
+    print(f"  law (bookkeeping only: {bare:6.0f} wheel-s per wall-s) {bare_ns:5.0f} ns; "
+          f"one log + exp + sin costs {ns:.1f} ns,")
+    print("  and an RK4 step evaluates the force law 4 times while an actuator is on (~half the time)")
     call_us, elem_ns = numpy_costs()
     print(f"  numpy instead (why the batch is compiled): {call_us:.2f} us per call at N = 256, "
           f"{elem_ns:.1f} ns per element for log+exp+sin;")

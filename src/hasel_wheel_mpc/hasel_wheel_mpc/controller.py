@@ -28,7 +28,7 @@ from hasel_wheel_sim.model_file import extensions_to_yaml_dict, model_from_mappi
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .disturbance import IntegralEstimator
-from .mpc import Decision, Mpc, MpcConfig
+from .mpc import Decision, Mpc, MpcConfig, next_pad
 from .observer import Estimate, Observer, ObserverConfig
 
 D = math.radians
@@ -150,8 +150,8 @@ class ControllerConfig:
 
 #: ROS parameters of observer_node / mpc_node that are fields of ObserverConfig / MpcConfig.
 OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_rate")
-MPC_PARAMS = ("brake_threshold", "terminal_weight", "time_weighted", "deadline_margin",
-              "max_horizon", "phi_a_min", "phi_a_max")
+MPC_PARAMS = ("brake_threshold", "brake_phi_a", "brake_phi_d", "terminal_weight",
+              "time_weighted", "deadline_margin", "max_horizon", "phi_a_min", "phi_a_max")
 
 
 def _node_parameters(text: str, node: str, where: str) -> dict[str, Any]:
@@ -238,6 +238,35 @@ def _dataclass_from(cls, data: Any, where: str):
         raise ParameterError(f"{where}: {exc}") from exc
 
 
+#: Why the MPC decides at a sample (:func:`decision_point`).
+SWITCH_ON, IDLE, NEW_REFERENCE, BETWEEN_PADS = "switch_on", "idle", "new_reference", "between_pads"
+
+
+def decision_point(reference_changed: bool, q: int, switched_on: bool, idle: int,
+                   idle_samples: int, act_counter: float, deact_counter: float, speed: float,
+                   min_time: float) -> str | None:
+    """Why the MPC decides at this sample, or None (shared by the embedded loop and mpc_node).
+
+    SWITCH_ON: the actuator of interest just switched on (paper Sec. V-B).  IDLE: HV has been
+    off for ``idle_samples`` samples.  On a new reference, if there is at least ``min_time``
+    [s] at ``speed`` [rad/s] before the next switching: NEW_REFERENCE while an actuator is on
+    (``deact_counter`` [rad] to its switch-off; the waiting command is replaced), and
+    BETWEEN_PADS while none is (``act_counter`` [rad] to the pending switch-on; that target
+    is replaced, by a braking pad only, because the MPC predicts from a pad that is on).
+    """
+    if switched_on:
+        return SWITCH_ON
+    if idle == idle_samples:
+        return IDLE
+    if reference_changed:
+        lead = min_time * max(speed, 0.1)
+        if q == 1 and deact_counter > lead:
+            return NEW_REFERENCE
+        if q == 0 and act_counter > lead:
+            return BETWEEN_PADS
+    return None
+
+
 class ControlStep(NamedTuple):
     """What the controller made of one sample."""
 
@@ -251,10 +280,10 @@ class ControlStep(NamedTuple):
 class SpeedController:
     """Observer, disturbance estimator and MPC, with the decision points of paper Sec. V-B.
 
-    Decides at each switch-on of the actuator of interest, on an idle wheel after
-    ``IDLE_SAMPLES`` samples with HV off, and once more at once when the reference changes
-    while the actuator is on with at least ``REDECIDE_MIN_TIME`` left (the waiting command is
-    then replaced before it latches).  ``clock`` [s] is the MPC's clock for its deadline
+    Decides where :func:`decision_point` says: at each switch-on of the actuator of interest,
+    on an idle wheel after ``IDLE_SAMPLES`` samples with HV off, and at once when the
+    reference changes with at least ``REDECIDE_MIN_TIME`` left before the next switching.
+    ``clock`` [s] is the MPC's clock for its deadline
     (default wall time).
     """
 
@@ -277,6 +306,7 @@ class SpeedController:
         self._prev: tuple[float, float] | None = None
         self._fd = 0.0
         self._last_ref: float | None = None
+        self._new_ref = False
 
     @property
     def d(self) -> float:
@@ -306,22 +336,39 @@ class SpeedController:
             self._cycle = [speed]
         d = self.d
         last = reference if self._last_ref is None else self._last_ref
-        redecide = (reference != last and s.q == 1 and not switched_on
-                    and e.deact_counter > REDECIDE_MIN_TIME * max(speed, 0.1))
         self._last_ref = reference
+        # a new reference counts until the next decision: one that arrives too close to a
+        # switch-off is taken up between the pads or at the next switch-on
+        self._new_ref = self._new_ref or reference != last
+        if reference != last:
+            # cycles predicted for the old reference say nothing about the model's error
+            # against the new one (a step down would read as the wheel being too fast)
+            self._window_pred = None
+            self._queued = [None] * len(self._queued)
+        why = decision_point(self._new_ref, s.q, switched_on, self._idle, IDLE_SAMPLES,
+                             e.act_counter, e.deact_counter, speed, REDECIDE_MIN_TIME)
+        if why is not None:
+            self._new_ref = False
         dec = None
-        if switched_on or self._idle == IDLE_SAMPLES or redecide:
+        if why == BETWEEN_PADS:
+            if speed + d >= reference + self.mpc.config.brake_threshold:
+                dec = self.mpc.brake_now(e.xi1, speed, d, e.act_counter)
+        elif why is not None:
             pa_now, pd_now = self._angles.get(s.last_command_sequence, START_ANGLES)
             dec = self.mpc.decide(e.xi1, speed, s.eta_unwrapped, pa_now, pd_now, reference, d,
                                   e.accel_coefficients if observer else (0.0, 0.0, 0.0))
-            if not switched_on:      # idle wheel: the next pad from the measured sector
-                n_a = (int(math.floor(e.xi1 / (math.pi / 8))) + 1) % 16
-                dec = dec._replace(command=dec.command._replace(n_a=n_a))
+        if dec is not None:
             c = dec.command
+            if why != SWITCH_ON:     # away from a switch-on: the pad from the wheel's angle
+                lead = self.mpc.config.deadline_margin
+                c = c._replace(n_a=next_pad(e.xi1, speed, c.phi_a, lead))
+                dec = dec._replace(command=c)
             self._angles[c.sequence] = (c.phi_a, c.phi_d)
             self.observer.command_sent(c.sequence, c.phi_a, c.phi_d)
             prediction = None if dec.braking else dec.predicted_speed - d   # model-only mean
-            if redecide and self._queued:
+            if why == BETWEEN_PADS:           # the pending pad's cycle is now a braking one
+                self._window_pred = None
+            elif why == NEW_REFERENCE and self._queued:
                 self._queued[-1] = prediction
             else:
                 self._queued.append(prediction)

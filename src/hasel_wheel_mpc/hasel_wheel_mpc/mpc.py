@@ -21,7 +21,15 @@ the predicted speed, and the observer's acceleration disturbance a_d(xi1) [rad/s
 to the model's acceleration (see observer.py and disturbance.py).
 
 Braking (Sec. V-A): when the estimated speed is at least ``brake_threshold`` [rad/s] above the
-reference, u = braking_input (n_a = eta + 2, -22 deg, -6 deg); no search.
+reference, u = braking_input (n_a = eta + 2, ``brake_phi_a``, ``brake_phi_d``); no search.
+Defaults 0.3 rad/s, -22.4 deg and -6 deg (the paper: 0.3, -22, -6): each braking pad switches
+on as early as allowed, which in our braking-force model (mirrored (43)) is much the strongest:
+the force grows with xi_c - phi_a, and its bump peaks near |xi_c| = 21 deg, just after a
+braking pad switches on; there xi_c - phi_a is 1.4 deg instead of 1.0 deg. phi_a is never
+earlier than the braking pad can still switch on (:func:`earliest_brake_angle`): a target that
+has passed when the command latches would come round only a turn later. A new reference between
+two pads is braked on at once (:meth:`Mpc.brake_now`) if the speed is above it by the
+threshold.
 
 Deadline: the decision must be ready ``deadline_margin`` [s] (the command's way to the wheel)
 before the current actuator switches off, as the prediction times it.  A later decision is
@@ -60,7 +68,7 @@ class MpcConfig:
     refine_phi_a: tuple[float, ...] = tuple(D(x) for x in (-0.75, -0.5, -0.25, 0.0, 0.25, 0.5, 0.75))
     refine_phi_d: tuple[float, ...] = tuple(D(x) for x in (20.0, 21.0, 22.0))
     brake_threshold: float = 0.3       # [rad/s] above the reference
-    brake_phi_a: float = D(-22.0)
+    brake_phi_a: float = D(-22.4)      # [rad], or the earliest the pad can still switch on
     brake_phi_d: float = D(-6.0)
     max_horizon: float = 4.0           # longest prediction [s] (slow wheels)
     terminal_weight: float = 1.0       # w_T of our terminal term [1]; 0 = none
@@ -230,6 +238,37 @@ def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: fl
     return k
 
 
+#: Rotation [ticks of 1/300 s at the current speed] between the current pad's switch-off angle
+#: and the braking pad's switch-on angle: the firmware switches off on the first tick past
+#: phi_d and latches the braking target then, so a target less than a tick ahead may already
+#: be behind the wheel, and would only come round again a turn later.
+BRAKE_LATCH_TICKS = 2.0
+
+
+def earliest_brake_angle(xi1: float, xi2: float, latch: float) -> float:
+    """Most negative braking phi_a [rad] at which the braking pad of ``braking_input(xi1)`` can
+    still switch on: its contact angle where the command latches, at the unwrapped wheel
+    angle ``latch`` [rad], plus BRAKE_LATCH_TICKS ticks of rotation at xi2 [rad/s].  A
+    command latches where the current pad switches off, or on arrival if no pad is on.
+    After a driving pad that switches off at 22 deg this is -22 deg at 2.6 rad/s; after a
+    braking pad (off at -6 deg) it is ~-28 deg, i.e. no limit."""
+    pad = math.floor(xi1 / SECTOR) + 2
+    return latch - pad * SECTOR + BRAKE_LATCH_TICKS * TICK * max(xi2, 0.0)
+
+
+def next_pad(xi1: float, xi2: float, phi_a: float, lead: float) -> int:
+    """The first actuator (0..15) whose switch-on angle ``phi_a`` [rad] is still ahead of the
+    wheel when a command sent now arrives: xi1 [rad] advanced by xi2 [rad/s] x ``lead`` [s].
+
+    For decisions made away from a switch-on (idle wheel, new reference): the pad after the
+    sector floor(xi1 / (pi/8)) would skip a pad that is less than phi_a past the sector
+    boundary, and a slow wheel could then coast to a stop.  A braking phi_a (< 0) gives the
+    pad two sectors ahead, as braking_input does.
+    """
+    ahead = xi1 + max(xi2, 0.0) * lead
+    return (int(math.floor((ahead - phi_a) / SECTOR)) + 1) % 16
+
+
 class Mpc:
     """``decide(xi1, xi2, eta_unwrapped, phi_a_now, phi_d_now, reference, d, disturbance)``.
 
@@ -275,11 +314,10 @@ class Mpc:
         self.seq += 1
         self.decisions += 1
         if xi2 + d >= reference + self.config.brake_threshold:
-            n_a, pa, pd = braking_input(xi1, self.config.brake_phi_a, self.config.brake_phi_d)
-            left = (eta_unwrapped * SECTOR + phi_d_now - xi1) / max(xi2, 1e-3)
-            dt = self.clock() - t0
-            return Decision(Command(n_a, pa, pd, self.seq), xi2 + d, math.nan, 0, dt, True,
-                            left - self.config.deadline_margin - dt, False)
+            off = eta_unwrapped * SECTOR + phi_d_now
+            if not xi1 <= off <= xi1 + SECTOR:   # no pad on (idle wheel): latches on arrival
+                off = self._arrival(xi1, xi2)
+            return self._brake(t0, xi1, xi2, off, d, off)
         s = self._base.copy()
         s[L.S_XI1] = xi1
         s[L.S_XI2] = xi2
@@ -293,8 +331,10 @@ class Mpc:
         s[L.S_PEND] = 1.0
         s[L.S_PEND_NA] = float((eta_unwrapped + 1) % 16)
         pv = set_disturbance(self.pv.copy(), self.pv, disturbance)
-        # long enough for the rest of this pad and the whole next one at the current speed
-        horizon = min(self.config.max_horizon, 2.5 * SECTOR / max(xi2, 0.3))
+        # long enough for the rest of this pad and the whole next one at the current speed:
+        # 2.5 sectors, more after a braking pad's switch-on (at -22 deg, a sector earlier)
+        to_go = max(2.5 * SECTOR, 1.25 * ((eta_unwrapped + 2) * SECTOR - xi1))
+        horizon = min(self.config.max_horizon, to_go / max(xi2, 0.3))
         n_ticks = max(int(horizon / TICK), 10)
         cfg = self.config
         cands = self.cands
@@ -324,6 +364,32 @@ class Mpc:
         cmd = Command((eta_unwrapped + 1) % 16, pa, pd, self.seq)
         return Decision(cmd, float(means[best]) + d, float(costs[best]), n, dt, False, slack,
                         missed)
+
+    def brake_now(self, xi1: float, xi2: float, d: float, act_counter: float) -> Decision:
+        """A braking decision while no actuator is on (a new reference between two pads): it
+        replaces the pending target, which switches on ``act_counter`` [rad] from now.
+        xi1 [rad] unwrapped, xi2 and the speed offset d [rad/s]."""
+        t0 = self.clock()
+        self.seq += 1
+        self.decisions += 1
+        return self._brake(t0, xi1, xi2, self._arrival(xi1, xi2), d, xi1 + act_counter)
+
+    def _arrival(self, xi1: float, xi2: float) -> float:
+        """Wheel angle [rad] when a command sent now arrives: the sample's age (a tick at
+        most) and the command's way (deadline_margin) at xi2 [rad/s]."""
+        return xi1 + max(xi2, 0.0) * (TICK + self.config.deadline_margin)
+
+    def _brake(self, t0: float, xi1: float, xi2: float, latch: float, d: float,
+               due: float) -> Decision:
+        """The braking input (Sec. III-D), its phi_a no earlier than the braking pad can still
+        switch on once the command latches at ``latch`` [rad] (and never past the middle of
+        its window); the command must be there before the wheel reaches ``due`` [rad]."""
+        n_a, pa, pd = braking_input(xi1, self.config.brake_phi_a, self.config.brake_phi_d)
+        pa = min(max(pa, earliest_brake_angle(xi1, xi2, latch)), 0.5 * (pa + pd))
+        left = (due - xi1) / max(xi2, 1e-3)
+        dt = self.clock() - t0
+        return Decision(Command(n_a, pa, pd, self.seq), xi2 + d, math.nan, 0, dt, True,
+                        left - self.config.deadline_margin - dt, False)
 
     def _costs(self, s, pv, cands, n_ticks, reference, d):
         costs = np.empty(len(cands))

@@ -33,8 +33,9 @@ from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_
                                                  text_param)
 from hasel_wheel_sim.model import SECTOR
 
-from .controller import MPC_PARAMS
-from .mpc import Mpc, MpcConfig
+from .controller import (BETWEEN_PADS, MPC_PARAMS, REDECIDE_MIN_TIME, SWITCH_ON,
+                         decision_point)
+from .mpc import Mpc, MpcConfig, next_pad
 from .node_model import declare_controller_model
 
 D = math.radians
@@ -66,6 +67,13 @@ class MpcNode(Node):
             float_param("braking mode when the estimated speed (+ d) exceeds the reference by "
                         "this much [rad/s]", 0.01, 2.0))
         self.declare_parameter(
+            "brake_phi_a", cfg.brake_phi_a,
+            float_param("braking activation angle phi_a of pad eta + 2 [rad] (the earliest the "
+                        "pad can still switch on is used if that is later)", -SECTOR, 0.0))
+        self.declare_parameter(
+            "brake_phi_d", cfg.brake_phi_d,
+            float_param("braking deactivation angle phi_d [rad], above brake_phi_a", -SECTOR, 0.0))
+        self.declare_parameter(
             "terminal_weight", cfg.terminal_weight,
             float_param("weight w_T of the terminal speed error in the cost [1]; 0 = (59) alone",
                         0.0, 100.0))
@@ -93,9 +101,9 @@ class MpcNode(Node):
             int_param("decide on an idle wheel after this many samples with HV off [samples]",
                       10, 3000)).value
         self.redecide_time = self.declare_parameter(
-            "redecide_min_time", 0.02,
-            float_param("re-decide on a new reference only if the current actuator stays on "
-                        "this long [s]", 0.0, 0.2)).value
+            "redecide_min_time", REDECIDE_MIN_TIME,
+            float_param("decide at once on a new reference only if the next switching (off, "
+                        "or on between pads) is at least this far away [s]", 0.0, 0.2)).value
         period = self.declare_parameter(
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
                                                    True)).value
@@ -108,6 +116,7 @@ class MpcNode(Node):
         self.prev_q = 0
         self.idle = 0
         self.last_ref = self.reference
+        self.new_ref = False
         self.started = False
         self.start_pad, self.start_idle = -1, 0
         self.encoder: deque[tuple[float, float]] = deque(maxlen=START_SAMPLES)   # (t s, angle rad)
@@ -208,23 +217,30 @@ class MpcNode(Node):
         switched_on = e.q == 1 and self.prev_q == 0
         self.prev_q = e.q
         ref = self.reference
-        # a new reference while the current actuator is on: decide again now (the waiting command
-        # is replaced before it latches at the switch-off), if there is time before the switch-off
-        redecide = (ref != self.last_ref and e.q == 1 and not switched_on
-                    and e.deactivation_counter > self.redecide_time * max(speed, 0.1))
+        # a new reference counts until the next decision (controller.decision_point)
+        self.new_ref = self.new_ref or ref != self.last_ref
         self.last_ref = ref
         if not self.started:
             if not e.q:
                 self._start(e)
                 return
             self.started = True
-        if not (switched_on or self.idle == self.idle_samples or redecide):
+        why = decision_point(self.new_ref, e.q, switched_on, self.idle, self.idle_samples,
+                             e.activation_counter, e.deactivation_counter, speed,
+                             self.redecide_time)
+        if why is None:
             return
-        pa_now, pd_now = self.angles.get(self.latched_seq, DEFAULT_ANGLES)
-        dec = self.mpc.decide(e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref, e.disturbance,
-                              (e.accel_disturbance, 0.0, 0.0))
-        if not switched_on:      # idle wheel: the next pad from the estimated angle
-            n_a = self._next_pad(e.xi1, e.xi2, dec.command.phi_a)
+        self.new_ref = False
+        if why == BETWEEN_PADS:
+            if speed + e.disturbance < ref + self.mpc.config.brake_threshold:
+                return
+            dec = self.mpc.brake_now(e.xi1, speed, e.disturbance, e.activation_counter)
+        else:
+            pa_now, pd_now = self.angles.get(self.latched_seq, DEFAULT_ANGLES)
+            dec = self.mpc.decide(e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref,
+                                  e.disturbance, (e.accel_disturbance, 0.0, 0.0))
+        if why != SWITCH_ON:     # away from a switch-on: the pad from the estimated angle
+            n_a = next_pad(e.xi1, e.xi2, dec.command.phi_a, self.mpc.config.deadline_margin)
             dec = dec._replace(command=dec.command._replace(n_a=n_a))
         cmd = dec.command
         t = self.get_clock().now().nanoseconds * 1e-9
@@ -248,16 +264,6 @@ class MpcNode(Node):
             self.compute.append(dec.compute_time)
             self.slack_min = min(self.slack_min, slack)
 
-    def _next_pad(self, angle: float, speed: float, phi_a: float, lead: float = 0.0) -> int:
-        """The first actuator whose switch-on angle is still ahead when a command arrives
-        (wheel angle [rad] and speed [rad/s] now).
-
-        closed_loop takes floor(xi1 / (pi/8)) + 1, which skips a pad that is less than phi_a
-        past the sector boundary; for a slow wheel that can mean coasting to a stop.
-        """
-        ahead = angle + max(speed, 0.0) * (self.mpc.config.deadline_margin + lead)
-        return (int(math.floor((ahead - phi_a) / SECTOR)) + 1) % 16
-
     def _start(self, e: HybridStateEstimate) -> None:
         """Start the wheel as closed_loop does: the next pad at the default angles, sequence 0.
 
@@ -273,7 +279,8 @@ class MpcNode(Node):
         (t0, a0), (t1, a1) = ((self.encoder[0], self.encoder[-1]) if len(self.encoder) > 1 else
                               ((0.0, e.xi1), (0.0, e.xi1)))
         speed = (a1 - a0) / (t1 - t0) if t1 - t0 >= 0.02 else max(e.xi2, 0.0)
-        want = self._next_pad(a1, speed, DEFAULT_ANGLES[0], START_LEAD)
+        lead = self.mpc.config.deadline_margin + START_LEAD
+        want = next_pad(a1, speed, DEFAULT_ANGLES[0], lead)
         if want == self.start_pad and self.idle - self.start_idle < START_PERIOD:
             return                                          # in flight
         self.start_pad, self.start_idle = want, self.idle

@@ -162,6 +162,11 @@ class ObserverNode(Node):
                               float(msg.command.phi_d))
         d = self.est.d if self.est else 0.0
         prediction = None if msg.braking else msg.predicted_speed - d     # model-only mean
+        if math.isfinite(self.reference) and msg.reference_speed != self.reference:
+            # cycles predicted for the old reference say nothing about the model's error
+            # against the new one (as controller.SpeedController)
+            self.window_pred = None
+            self.queued = deque([None] * len(self.queued), maxlen=self.queued.maxlen)
         if not self.off_since_status and self.queued:
             self.queued[-1] = prediction
         else:

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_mpc.mpc import Mpc, MpcConfig, cost_59
+from hasel_wheel_mpc.mpc import Mpc, MpcConfig, cost_59, earliest_brake_angle, next_pad
 from hasel_wheel_sim.model import SECTOR
 
 D = math.radians
@@ -31,13 +31,48 @@ def test_cost_59_by_hand():
 
 
 def test_braking_when_the_speed_is_above_the_reference_by_the_threshold():
-    mpc = Mpc(config=MpcConfig(brake_threshold=0.3))
+    mpc = Mpc(config=MpcConfig(brake_threshold=0.3, brake_phi_a=D(-22)))
     xi1 = 20 * SECTOR + D(3)                               # pad 4 (2nd revolution) just on
     dec = mpc.decide(xi1, 2.6, 20, D(3), D(22), reference=2.0)
     assert dec.braking and dec.candidates == 0
     assert (dec.command.n_a, dec.command.phi_a, dec.command.phi_d) == (6, D(-22), D(-6))
     dec = mpc.decide(xi1, 2.25, 20, D(3), D(22), reference=2.0)   # 0.25 above: keep driving
     assert not dec.braking and dec.command.n_a == 5 and dec.command.phi_a >= 0
+
+
+def test_braking_pad_switches_on_no_earlier_than_it_still_can():
+    # pad 20 on, off at 22 deg: the braking pad 22 is at 22 - 45 = -23 deg there, and the
+    # firmware may switch off up to a tick late, so 2 ticks of rotation are kept in hand
+    mpc = Mpc(config=MpcConfig(brake_phi_a=D(-22.4)))
+    xi1 = 20 * SECTOR + D(3)
+    dec = mpc.decide(xi1, 2.6, 20, D(3), D(22), reference=2.0)
+    assert dec.command.phi_a == pytest.approx(D(-23) + 2 * TICK_S * 2.6, abs=1e-12)
+    off = 20 * SECTOR + D(22)
+    assert earliest_brake_angle(xi1, 2.6, off) == pytest.approx(D(-22.007), abs=1e-5)
+    # pad 22 braking (on at -22.4 deg), off at -6 deg: the next braking pad, 23, is at
+    # -28.5 deg there, so -22.4 deg is allowed as it is
+    xi1 = 22 * SECTOR - D(22.4)
+    dec = mpc.decide(xi1, 2.4, 22, D(-22.4), D(-6), reference=2.0)
+    assert (dec.command.n_a, dec.command.phi_a) == (7, D(-22.4))
+    # between pads (none on): the command latches on arrival, a tick and the command's way
+    # after the sample
+    xi1 = 21 * SECTOR + D(22.2)
+    dec = mpc.brake_now(xi1, 2.6, 0.0, act_counter=D(5))
+    arrival = xi1 + 2.6 * (TICK_S + mpc.config.deadline_margin)
+    assert dec.braking and dec.command.n_a == 7
+    assert dec.command.phi_a == pytest.approx(arrival - 23 * SECTOR + 2 * TICK_S * 2.6)
+    assert dec.deadline_slack == pytest.approx(D(5) / 2.6 - mpc.config.deadline_margin
+                                               - dec.compute_time)
+
+
+def test_next_pad_is_the_first_whose_switch_on_is_still_ahead():
+    # at 10 deg into sector 3 with a command arriving 0.05 rad (2.86 deg) later
+    xi1, v, lead = 3 * SECTOR + D(10), 1.0, 0.05
+    assert next_pad(xi1, v, D(15), lead) == 3            # 15 deg of pad 3 is still ahead
+    assert next_pad(xi1, v, D(12), lead) == 4            # passed by the time it arrives
+    assert next_pad(xi1, v, D(5), lead) == 4
+    assert next_pad(xi1, v, D(-22), lead) == 5           # braking: two pads ahead
+    assert next_pad(15 * SECTOR + D(20), 0.0, D(3), 0.0) == 0     # wraps from 15 to 0
 
 
 def test_no_complete_cycle_falls_back_to_the_strongest_push():
