@@ -26,6 +26,7 @@ from hasel_wheel_driver.samples import TelemetrySample
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.model_file import extensions_to_yaml_dict, model_from_mapping
 from hasel_wheel_sim.params import ParameterError, WheelParams
+from hasel_wheel_sim.wheel import TICK
 
 from .disturbance import IntegralEstimator
 from .mpc import Decision, Mpc, MpcConfig, next_pad
@@ -327,6 +328,18 @@ class SpeedController:
         switched_on = s.q == 1 and self._prev_q == 0
         switched_off = s.q == 0 and self._prev_q == 1
         self._prev_q = s.q
+        last = reference if self._last_ref is None else self._last_ref
+        self._last_ref = reference
+        # a new reference counts until the next decision: one that arrives too close to a
+        # switch-off is taken up between the pads or at the next switch-on
+        self._new_ref = self._new_ref or reference != last
+        if reference != last:
+            # cycles predicted for the old reference say nothing about the model's error
+            # against the new one (a step down would read as the wheel being too fast), also
+            # the one ending at this very sample.  (observer_node learns of the new reference
+            # only with the MPC's next status, so it still scores that one, against the old.)
+            self._window_pred = None
+            self._queued = [None] * len(self._queued)
         if switched_off:
             # the window [previous switch-off, this one) is a cycle some decision predicted
             if self.estimator and self._window_pred is not None and len(self._cycle) > 1:
@@ -335,16 +348,6 @@ class SpeedController:
             self._window_pred = self._queued.pop(0) if self._queued else None
             self._cycle = [speed]
         d = self.d
-        last = reference if self._last_ref is None else self._last_ref
-        self._last_ref = reference
-        # a new reference counts until the next decision: one that arrives too close to a
-        # switch-off is taken up between the pads or at the next switch-on
-        self._new_ref = self._new_ref or reference != last
-        if reference != last:
-            # cycles predicted for the old reference say nothing about the model's error
-            # against the new one (a step down would read as the wheel being too fast)
-            self._window_pred = None
-            self._queued = [None] * len(self._queued)
         why = decision_point(self._new_ref, s.q, switched_on, self._idle, IDLE_SAMPLES,
                              e.act_counter, e.deact_counter, speed, REDECIDE_MIN_TIME)
         if why is not None:
@@ -356,11 +359,13 @@ class SpeedController:
         elif why is not None:
             pa_now, pd_now = self._angles.get(s.last_command_sequence, START_ANGLES)
             dec = self.mpc.decide(e.xi1, speed, s.eta_unwrapped, pa_now, pd_now, reference, d,
-                                  e.accel_coefficients if observer else (0.0, 0.0, 0.0))
+                                  e.accel_coefficients if observer else (0.0, 0.0, 0.0),
+                                  pad_on=why != IDLE)
         if dec is not None:
             c = dec.command
-            if why != SWITCH_ON:     # away from a switch-on: the pad from the wheel's angle
-                lead = self.mpc.config.deadline_margin
+            if why == IDLE and not dec.braking:
+                # no pad on: the command latches on arrival, and the telemetry's pad is stale
+                lead = TICK + self.mpc.config.deadline_margin
                 c = c._replace(n_a=next_pad(e.xi1, speed, c.phi_a, lead))
                 dec = dec._replace(command=c)
             self._angles[c.sequence] = (c.phi_a, c.phi_d)

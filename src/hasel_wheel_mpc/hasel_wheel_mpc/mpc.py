@@ -21,15 +21,15 @@ the predicted speed, and the observer's acceleration disturbance a_d(xi1) [rad/s
 to the model's acceleration (see observer.py and disturbance.py).
 
 Braking (Sec. V-A): when the estimated speed is at least ``brake_threshold`` [rad/s] above the
-reference, u = braking_input (n_a = eta + 2, ``brake_phi_a``, ``brake_phi_d``); no search.
+reference, u = (n_a, ``brake_phi_a``, ``brake_phi_d``) with n_a = eta + 2; no search.
 Defaults 0.3 rad/s, -22.4 deg and -6 deg (the paper: 0.3, -22, -6): each braking pad switches
 on as early as allowed, which in our braking-force model (mirrored (43)) is much the strongest:
 the force grows with xi_c - phi_a, and its bump peaks near |xi_c| = 21 deg, just after a
-braking pad switches on; there xi_c - phi_a is 1.4 deg instead of 1.0 deg. phi_a is never
-earlier than the braking pad can still switch on (:func:`earliest_brake_angle`): a target that
-has passed when the command latches would come round only a turn later. A new reference between
-two pads is braked on at once (:meth:`Mpc.brake_now`) if the speed is above it by the
-threshold.
+braking pad switches on; there xi_c - phi_a is 1.4 deg instead of 1.0 deg.  The pad and
+phi_a come from where the command latches (:func:`braking_command`): phi_a is never earlier
+than the pad can still switch on, since a target that has passed when the command latches
+would come round only a turn later.  A new reference between two pads is braked on at once
+(:meth:`Mpc.brake_now`) if the speed is above it by the threshold.
 
 Deadline: the decision must be ready ``deadline_margin`` [s] (the command's way to the wheel)
 before the current actuator switches off, as the prediction times it.  A later decision is
@@ -50,7 +50,7 @@ from hasel_wheel_driver.samples import Command
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import advance
 from hasel_wheel_sim.jit import jit
-from hasel_wheel_sim.model import SECTOR, Extensions, braking_input, param_vector
+from hasel_wheel_sim.model import SECTOR, Extensions, param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.wheel import TICK, initial_state
 
@@ -85,7 +85,9 @@ class MpcConfig:
         if not (math.isfinite(self.brake_threshold) and self.brake_threshold > 0.0):
             raise ValueError(f"brake_threshold = {self.brake_threshold!r} rad/s: expected > 0")
         if not (-SECTOR < self.brake_phi_a < self.brake_phi_d < 0.0):
-            raise ValueError("braking angles: expected -pi/8 < brake_phi_a < brake_phi_d < 0 rad")
+            raise ValueError(f"braking angles brake_phi_a = {self.brake_phi_a!r}, brake_phi_d = "
+                             f"{self.brake_phi_d!r} rad: expected -pi/8 < brake_phi_a < "
+                             f"brake_phi_d < 0 rad")
         if self.terminal_weight < 0.0 or self.deadline_margin < 0.0 or self.max_horizon <= 0.0:
             raise ValueError("terminal_weight and deadline_margin must be >= 0, max_horizon > 0")
         if not 0.0 <= self.phi_a_min < self.phi_a_max <= SECTOR:
@@ -245,25 +247,38 @@ def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: fl
 BRAKE_LATCH_TICKS = 2.0
 
 
-def earliest_brake_angle(xi1: float, xi2: float, latch: float) -> float:
-    """Most negative braking phi_a [rad] at which the braking pad of ``braking_input(xi1)`` can
-    still switch on: its contact angle where the command latches, at the unwrapped wheel
-    angle ``latch`` [rad], plus BRAKE_LATCH_TICKS ticks of rotation at xi2 [rad/s].  A
-    command latches where the current pad switches off, or on arrival if no pad is on.
-    After a driving pad that switches off at 22 deg this is -22 deg at 2.6 rad/s; after a
-    braking pad (off at -6 deg) it is ~-28 deg, i.e. no limit."""
-    pad = math.floor(xi1 / SECTOR) + 2
+def earliest_brake_angle(pad: int, xi2: float, latch: float) -> float:
+    """Most negative braking phi_a [rad] at which the (unwrapped) braking ``pad`` can still
+    switch on: its contact angle where the command latches, at the unwrapped wheel angle
+    ``latch`` [rad], plus BRAKE_LATCH_TICKS ticks of rotation at xi2 [rad/s].  A command
+    latches where the current pad switches off, or on arrival if no pad is on."""
     return latch - pad * SECTOR + BRAKE_LATCH_TICKS * TICK * max(xi2, 0.0)
+
+
+def braking_command(latch: float, xi2: float, phi_a: float, phi_d: float) -> tuple[int, float]:
+    """(unwrapped pad, phi_a [rad]) of the braking input for a command that latches at the
+    wheel angle ``latch`` [rad], with the configured ``phi_a`` < ``phi_d`` < 0 [rad].
+
+    The pad is the first one that can still brake for at least half its window: the one
+    after the sector of ``latch`` if it can switch on no later than the middle of
+    [phi_a, phi_d], else the next.  After a driving pad that switches off at 22 deg that is
+    eta + 2, as in Sec. III-D, at -22 deg (2.6 rad/s: 2 ticks after -23 deg); after a
+    braking pad (off at -6 deg) the next pad, at phi_a.
+    """
+    limit = 0.5 * (phi_a + phi_d)
+    pad = math.floor(latch / SECTOR) + 1
+    if earliest_brake_angle(pad, xi2, latch) > limit:
+        pad += 1
+    return pad, max(phi_a, earliest_brake_angle(pad, xi2, latch))
 
 
 def next_pad(xi1: float, xi2: float, phi_a: float, lead: float) -> int:
     """The first actuator (0..15) whose switch-on angle ``phi_a`` [rad] is still ahead of the
     wheel when a command sent now arrives: xi1 [rad] advanced by xi2 [rad/s] x ``lead`` [s].
 
-    For decisions made away from a switch-on (idle wheel, new reference): the pad after the
-    sector floor(xi1 / (pi/8)) would skip a pad that is less than phi_a past the sector
-    boundary, and a slow wheel could then coast to a stop.  A braking phi_a (< 0) gives the
-    pad two sectors ahead, as braking_input does.
+    For a driving decision on an idle wheel (no pad on, so the command latches on arrival):
+    the pad after the sector floor(xi1 / (pi/8)) would skip a pad that is less than phi_a
+    past the sector boundary, and a slow wheel could then coast to a stop.
     """
     ahead = xi1 + max(xi2, 0.0) * lead
     return (int(math.floor((ahead - phi_a) / SECTOR)) + 1) % 16
@@ -302,21 +317,21 @@ class Mpc:
 
     def decide(self, xi1: float, xi2: float, eta_unwrapped: int, phi_a_now: float,
                phi_d_now: float, reference: float, d: float = 0.0,
-               disturbance: tuple = (0.0, 0.0, 0.0)) -> Decision:
+               disturbance: tuple = (0.0, 0.0, 0.0), pad_on: bool = True) -> Decision:
         """Choose u for the pad after ``eta_unwrapped`` (the actuator that just switched on).
 
         xi1 [rad] unwrapped, xi2 [rad/s], (phi_a_now, phi_d_now) [rad] of the current pad,
         reference [rad/s]; ``d`` [rad/s] is added to the predicted speed; ``disturbance``
         (c, a, b) [rad/s^2], the observer's a_d(xi1) = c + a cos xi1 + b sin xi1, is added to
-        the model's acceleration over the whole prediction.
+        the model's acceleration over the whole prediction.  ``pad_on`` False: no pad is on
+        (an idle wheel), so a braking command latches on arrival, not at a switch-off.
         """
         t0 = self.clock()
         self.seq += 1
         self.decisions += 1
         if xi2 + d >= reference + self.config.brake_threshold:
-            off = eta_unwrapped * SECTOR + phi_d_now
-            if not xi1 <= off <= xi1 + SECTOR:   # no pad on (idle wheel): latches on arrival
-                off = self._arrival(xi1, xi2)
+            # latches at the current pad's switch-off, or on arrival if none is on
+            off = eta_unwrapped * SECTOR + phi_d_now if pad_on else self._arrival(xi1, xi2)
             return self._brake(t0, xi1, xi2, off, d, off)
         s = self._base.copy()
         s[L.S_XI1] = xi1
@@ -381,14 +396,13 @@ class Mpc:
 
     def _brake(self, t0: float, xi1: float, xi2: float, latch: float, d: float,
                due: float) -> Decision:
-        """The braking input (Sec. III-D), its phi_a no earlier than the braking pad can still
-        switch on once the command latches at ``latch`` [rad] (and never past the middle of
-        its window); the command must be there before the wheel reaches ``due`` [rad]."""
-        n_a, pa, pd = braking_input(xi1, self.config.brake_phi_a, self.config.brake_phi_d)
-        pa = min(max(pa, earliest_brake_angle(xi1, xi2, latch)), 0.5 * (pa + pd))
+        """The braking input (Sec. III-D) for a command that latches at ``latch`` [rad]
+        (:func:`braking_command`); it must be there before the wheel reaches ``due`` [rad]."""
+        pd = self.config.brake_phi_d
+        pad, pa = braking_command(latch, xi2, self.config.brake_phi_a, pd)
         left = (due - xi1) / max(xi2, 1e-3)
         dt = self.clock() - t0
-        return Decision(Command(n_a, pa, pd, self.seq), xi2 + d, math.nan, 0, dt, True,
+        return Decision(Command(pad % 16, pa, pd, self.seq), xi2 + d, math.nan, 0, dt, True,
                         left - self.config.deadline_margin - dt, False)
 
     def _costs(self, s, pv, cands, n_ticks, reference, d):

@@ -32,9 +32,9 @@ from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_
                                                  publish_status, qos_profile, run_node,
                                                  text_param)
 from hasel_wheel_sim.model import SECTOR
+from hasel_wheel_sim.wheel import TICK
 
-from .controller import (BETWEEN_PADS, MPC_PARAMS, REDECIDE_MIN_TIME, SWITCH_ON,
-                         decision_point)
+from .controller import BETWEEN_PADS, IDLE, MPC_PARAMS, REDECIDE_MIN_TIME, decision_point
 from .mpc import Mpc, MpcConfig, next_pad
 from .node_model import declare_controller_model
 
@@ -238,9 +238,12 @@ class MpcNode(Node):
         else:
             pa_now, pd_now = self.angles.get(self.latched_seq, DEFAULT_ANGLES)
             dec = self.mpc.decide(e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref,
-                                  e.disturbance, (e.accel_disturbance, 0.0, 0.0))
-        if why != SWITCH_ON:     # away from a switch-on: the pad from the estimated angle
-            n_a = next_pad(e.xi1, e.xi2, dec.command.phi_a, self.mpc.config.deadline_margin)
+                                  e.disturbance, (e.accel_disturbance, 0.0, 0.0),
+                                  pad_on=why != IDLE)
+        if why == IDLE and not dec.braking:
+            # no pad on: the command latches on arrival, and the telemetry's pad is stale
+            lead = TICK + self.mpc.config.deadline_margin
+            n_a = next_pad(e.xi1, e.xi2, dec.command.phi_a, lead)
             dec = dec._replace(command=dec.command._replace(n_a=n_a))
         cmd = dec.command
         t = self.get_clock().now().nanoseconds * 1e-9

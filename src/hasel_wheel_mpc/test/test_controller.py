@@ -25,37 +25,57 @@ def test_decision_points(args, why):
     assert decision_point(changed, q, on, idle, 150, act, deact, 2.0, REDECIDE_MIN_TIME) == why
 
 
-def _step_down(t_step: float):
-    """2.6 -> 2.0 rad/s at t_step on the nominal plant; returns (q, counters at the step as
-    time [s], phi_a of the first switch-on after the step)."""
+def _step(t_step: float, high: float, low: float):
+    """high -> low rad/s at t_step on the nominal plant.  Returns (q, time [s] to the next
+    switching at the step, phi_a of the first switch-on after it, largest jump of the plant's
+    unwrapped target from one tick to the next, d [rad/s] at the step and 0.5 s after)."""
     cfg = controller_config()
-    loop = WheelLoop(cfg, ((0.0, 2.6), (t_step, 2.0)), PlantConfig(switching="tick"), w0=2.6,
+    loop = WheelLoop(cfg, ((0.0, high), (t_step, low)), PlantConfig(switching="tick"), w0=high,
                      clock=lambda: 0.0)
     s = loop.plant.wheel.s
-    at_step = None
-    prev_q = s[L.S_Q]
+    at_step = first_on = None
+    prev_q, prev_eta, jump = s[L.S_Q], s[L.S_ETA], 0.0
     while loop.plant.t < t_step + 0.5:
         loop.step()
+        jump = max(jump, s[L.S_ETA] - prev_eta)
+        prev_eta = s[L.S_ETA]
         if at_step is None and loop.plant.t >= t_step:
             v = s[L.S_XI2]
-            on_in = (s[L.S_THETA_ON] - s[L.S_XI1]) / v
-            off_in = (s[L.S_THETA_OFF] - s[L.S_XI1]) / v
-            at_step = (int(s[L.S_Q]), on_in, off_in)
-        elif at_step is not None and prev_q == 0.0 and s[L.S_Q] == 1.0:
-            return at_step + (s[L.S_PHI_A],)
+            left = (s[L.S_THETA_OFF] if s[L.S_Q] else s[L.S_THETA_ON]) - s[L.S_XI1]
+            at_step = (int(s[L.S_Q]), left / v, loop.ctrl.d)
+        elif at_step is not None and first_on is None and prev_q == 0.0 and s[L.S_Q] == 1.0:
+            first_on = s[L.S_PHI_A]
         prev_q = s[L.S_Q]
-    raise AssertionError("no switch-on within 0.5 s of the step")
+    assert first_on is not None, "no switch-on within 0.5 s of the step"
+    q, left, d0 = at_step
+    return q, left, first_on, jump, d0, loop.ctrl.d
+
+
+#: Time the controller needs before the next switching to act on a new reference: it sees the
+#: step one sample later, its command needs its way (4 ms), and the latch waits for a tick.
+SPARE = REDECIDE_MIN_TIME + 2 / 300 + 0.004 + 0.002
 
 
 def test_a_step_down_is_braked_on_at_the_next_switch_on_during_a_pad_or_between_two():
-    # steps spread over one pad cycle (~0.15 s at 2.6 rad/s); the controller sees the step one
-    # sample later and its command needs its way (4 ms) too, so "enough time" is counted
-    # with 2 ticks and the latency on top of REDECIDE_MIN_TIME
-    spare = REDECIDE_MIN_TIME + 2 / 300 + 0.004 + 0.002
+    # steps spread over one pad cycle (~0.15 s at 2.6 rad/s)
     kinds = set()
     for k in range(16):
-        q, on_in, off_in, phi_a = _step_down(3.0 + 0.01 * k)
-        if (off_in if q else on_in) > spare:
+        q, left, phi_a, jump, d0, d1 = _step(3.0 + 0.01 * k, 2.6, 2.0)
+        if left > SPARE:
             kinds.add(q)
             assert phi_a < 0.0, f"step at q={q}: next switch-on drives (phi_a {phi_a:.3f} rad)"
+        # no target latched a turn late (a passed pad unwraps 16 ahead): at most the pad two
+        # sectors on (braking) per tick
+        assert jump <= 2.0, f"step at q={q}: the target jumped {jump:.0f} pads"
+        # braking cycles are no model error, nor are cycles predicted for the old reference
+        assert abs(d1 - d0) < 0.01, f"step at q={q}: d went {d0:+.3f} -> {d1:+.3f} rad/s"
     assert kinds == {0, 1}       # both cases were exercised
+
+
+def test_a_small_step_down_drives_on_with_the_next_pad_and_never_a_turn_late():
+    # 2.0 -> 1.85 rad/s: below the braking threshold, so a re-decision while a pad is on
+    # drives pad eta + 1, latched at that pad's switch-off
+    for k in range(16):
+        q, left, phi_a, jump, _, _ = _step(3.0 + 0.011 * k, 2.0, 1.85)
+        assert phi_a >= 0.0
+        assert jump <= 1.0, f"step at q={q}: the target jumped {jump:.0f} pads"

@@ -41,28 +41,36 @@ def test_braking_when_the_speed_is_above_the_reference_by_the_threshold():
 
 
 def test_braking_pad_switches_on_no_earlier_than_it_still_can():
-    # pad 20 on, off at 22 deg: the braking pad 22 is at 22 - 45 = -23 deg there, and the
-    # firmware may switch off up to a tick late, so 2 ticks of rotation are kept in hand
+    # pad 20 on, off at 22 deg: pad 21 is then at -0.5 deg (no braking window left), pad 22
+    # at 22 - 45 = -23 deg; the firmware may switch off up to a tick late, so 2 ticks of
+    # rotation are kept in hand: -23 deg + 2/300 s x 2.6 rad/s
     mpc = Mpc(config=MpcConfig(brake_phi_a=D(-22.4)))
     xi1 = 20 * SECTOR + D(3)
     dec = mpc.decide(xi1, 2.6, 20, D(3), D(22), reference=2.0)
+    assert dec.command.n_a == 6
     assert dec.command.phi_a == pytest.approx(D(-23) + 2 * TICK_S * 2.6, abs=1e-12)
-    off = 20 * SECTOR + D(22)
-    assert earliest_brake_angle(xi1, 2.6, off) == pytest.approx(D(-22.007), abs=1e-5)
-    # pad 22 braking (on at -22.4 deg), off at -6 deg: the next braking pad, 23, is at
-    # -28.5 deg there, so -22.4 deg is allowed as it is
+    assert earliest_brake_angle(22, 2.6, 20 * SECTOR + D(22)) == pytest.approx(D(-22.007),
+                                                                               abs=1e-5)
+    # pad 22 braking (on at -22.4 deg), off at -6 deg: pad 23 is at -28.5 deg there, so
+    # -22.4 deg is allowed as it is
     xi1 = 22 * SECTOR - D(22.4)
     dec = mpc.decide(xi1, 2.4, 22, D(-22.4), D(-6), reference=2.0)
     assert (dec.command.n_a, dec.command.phi_a) == (7, D(-22.4))
-    # between pads (none on): the command latches on arrival, a tick and the command's way
-    # after the sample
+    # between pads (none on) at 22.2 deg into sector 21: the command latches on arrival, a
+    # tick and the command's way (4 ms) later, 1.09 deg on, so 0.79 deg into sector 22; pad 23
+    # is at -21.71 deg there, soon enough (before the middle of [-22.4, -6] deg)
     xi1 = 21 * SECTOR + D(22.2)
     dec = mpc.brake_now(xi1, 2.6, 0.0, act_counter=D(5))
     arrival = xi1 + 2.6 * (TICK_S + mpc.config.deadline_margin)
     assert dec.braking and dec.command.n_a == 7
     assert dec.command.phi_a == pytest.approx(arrival - 23 * SECTOR + 2 * TICK_S * 2.6)
+    assert D(-21) < dec.command.phi_a < D(-20.5)
     assert dec.deadline_slack == pytest.approx(D(5) / 2.6 - mpc.config.deadline_margin
                                                - dec.compute_time)
+    # an idle wheel whose telemetry names a pending target less than a sector ahead: no pad
+    # is on, so the command latches on arrival too (not at that target's switch-off)
+    dec = mpc.decide(xi1, 2.6, 22, D(10), D(22), reference=2.0, pad_on=False)
+    assert dec.command.n_a == 7 and dec.command.phi_a < D(-20.5)
 
 
 def test_next_pad_is_the_first_whose_switch_on_is_still_ahead():
