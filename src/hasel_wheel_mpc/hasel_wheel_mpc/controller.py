@@ -268,6 +268,27 @@ def decision_point(reference_changed: bool, q: int, switched_on: bool, idle: int
     return None
 
 
+def decide_at(mpc: Mpc, why: str, xi1: float, speed: float, eta_unwrapped: int,
+              phi_a_now: float, phi_d_now: float, reference: float, d: float,
+              disturbance: tuple, act_counter: float) -> Decision | None:
+    """The MPC's decision at a :func:`decision_point` ``why`` (shared by the embedded loop and
+    mpc_node), or None: between two pads only a braking command replaces the pending target,
+    and only when the speed (+ d) is ``brake_threshold`` above the reference.  On an idle
+    wheel a driving command latches on arrival and the telemetry's pad is stale, so its pad
+    is the first whose switch-on is still ahead then (:func:`next_pad`).  Angles rad (xi1
+    unwrapped), speeds rad/s, ``act_counter`` rad to the pending switch-on."""
+    if why == BETWEEN_PADS:
+        if speed + d < reference + mpc.config.brake_threshold:
+            return None
+        return mpc.brake_now(xi1, speed, d, act_counter)
+    dec = mpc.decide(xi1, speed, eta_unwrapped, phi_a_now, phi_d_now, reference, d,
+                     disturbance, pad_on=why != IDLE)
+    if why == IDLE and not dec.braking:
+        n_a = next_pad(xi1, speed, dec.command.phi_a, TICK + mpc.config.deadline_margin)
+        dec = dec._replace(command=dec.command._replace(n_a=n_a))
+    return dec
+
+
 class ControlStep(NamedTuple):
     """What the controller made of one sample."""
 
@@ -353,21 +374,13 @@ class SpeedController:
         if why is not None:
             self._new_ref = False
         dec = None
-        if why == BETWEEN_PADS:
-            if speed + d >= reference + self.mpc.config.brake_threshold:
-                dec = self.mpc.brake_now(e.xi1, speed, d, e.act_counter)
-        elif why is not None:
+        if why is not None:
             pa_now, pd_now = self._angles.get(s.last_command_sequence, START_ANGLES)
-            dec = self.mpc.decide(e.xi1, speed, s.eta_unwrapped, pa_now, pd_now, reference, d,
-                                  e.accel_coefficients if observer else (0.0, 0.0, 0.0),
-                                  pad_on=why != IDLE)
+            dec = decide_at(self.mpc, why, e.xi1, speed, s.eta_unwrapped, pa_now, pd_now,
+                            reference, d, e.accel_coefficients if observer else (0.0, 0.0, 0.0),
+                            e.act_counter)
         if dec is not None:
             c = dec.command
-            if why == IDLE and not dec.braking:
-                # no pad on: the command latches on arrival, and the telemetry's pad is stale
-                lead = TICK + self.mpc.config.deadline_margin
-                c = c._replace(n_a=next_pad(e.xi1, speed, c.phi_a, lead))
-                dec = dec._replace(command=c)
             self._angles[c.sequence] = (c.phi_a, c.phi_d)
             self.observer.command_sent(c.sequence, c.phi_a, c.phi_d)
             prediction = None if dec.braking else dec.predicted_speed - d   # model-only mean

@@ -259,15 +259,15 @@ def braking_command(latch: float, xi2: float, phi_a: float, phi_d: float) -> tup
     """(unwrapped pad, phi_a [rad]) of the braking input for a command that latches at the
     wheel angle ``latch`` [rad], with the configured ``phi_a`` < ``phi_d`` < 0 [rad].
 
-    The pad is the first one that can still brake for at least half its window: the one
-    after the sector of ``latch`` if it can switch on no later than the middle of
-    [phi_a, phi_d], else the next.  After a driving pad that switches off at 22 deg that is
-    eta + 2, as in Sec. III-D, at -22 deg (2.6 rad/s: 2 ticks after -23 deg); after a
-    braking pad (off at -6 deg) the next pad, at phi_a.
+    The pad is the first one that can still brake for at least half its window: from the
+    one after the sector of ``latch`` on, the first that can switch on no later than the
+    middle of [phi_a, phi_d] (so the phi_a returned is always below phi_d).  After a driving
+    pad that switches off at 22 deg that is eta + 2, as in Sec. III-D, at -22 deg (2.6
+    rad/s: 2 ticks after -23 deg); after a braking pad (off at -6 deg) the next pad, at phi_a.
     """
     limit = 0.5 * (phi_a + phi_d)
     pad = math.floor(latch / SECTOR) + 1
-    if earliest_brake_angle(pad, xi2, latch) > limit:
+    while earliest_brake_angle(pad, xi2, latch) > limit:    # each pad is a sector further
         pad += 1
     return pad, max(phi_a, earliest_brake_angle(pad, xi2, latch))
 

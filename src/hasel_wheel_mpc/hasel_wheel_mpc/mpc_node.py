@@ -32,9 +32,8 @@ from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_
                                                  publish_status, qos_profile, run_node,
                                                  text_param)
 from hasel_wheel_sim.model import SECTOR
-from hasel_wheel_sim.wheel import TICK
 
-from .controller import BETWEEN_PADS, IDLE, MPC_PARAMS, REDECIDE_MIN_TIME, decision_point
+from .controller import MPC_PARAMS, REDECIDE_MIN_TIME, decide_at, decision_point
 from .mpc import Mpc, MpcConfig, next_pad
 from .node_model import declare_controller_model
 
@@ -231,20 +230,11 @@ class MpcNode(Node):
         if why is None:
             return
         self.new_ref = False
-        if why == BETWEEN_PADS:
-            if speed + e.disturbance < ref + self.mpc.config.brake_threshold:
-                return
-            dec = self.mpc.brake_now(e.xi1, speed, e.disturbance, e.activation_counter)
-        else:
-            pa_now, pd_now = self.angles.get(self.latched_seq, DEFAULT_ANGLES)
-            dec = self.mpc.decide(e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref,
-                                  e.disturbance, (e.accel_disturbance, 0.0, 0.0),
-                                  pad_on=why != IDLE)
-        if why == IDLE and not dec.braking:
-            # no pad on: the command latches on arrival, and the telemetry's pad is stale
-            lead = TICK + self.mpc.config.deadline_margin
-            n_a = next_pad(e.xi1, e.xi2, dec.command.phi_a, lead)
-            dec = dec._replace(command=dec.command._replace(n_a=n_a))
+        pa_now, pd_now = self.angles.get(self.latched_seq, DEFAULT_ANGLES)
+        dec = decide_at(self.mpc, why, e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref,
+                        e.disturbance, (e.accel_disturbance, 0.0, 0.0), e.activation_counter)
+        if dec is None:
+            return
         cmd = dec.command
         t = self.get_clock().now().nanoseconds * 1e-9
         self.pub_cmd.publish(fill(ActuationCommand(), samples.command_msg(cmd, t)))

@@ -6,7 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_mpc.mpc import Mpc, MpcConfig, cost_59, earliest_brake_angle, next_pad
+from hasel_wheel_mpc.mpc import (Mpc, MpcConfig, braking_command, cost_59, earliest_brake_angle,
+                                  next_pad)
 from hasel_wheel_sim.model import SECTOR
 
 D = math.radians
@@ -48,9 +49,8 @@ def test_braking_pad_switches_on_no_earlier_than_it_still_can():
     xi1 = 20 * SECTOR + D(3)
     dec = mpc.decide(xi1, 2.6, 20, D(3), D(22), reference=2.0)
     assert dec.command.n_a == 6
-    assert dec.command.phi_a == pytest.approx(D(-23) + 2 * TICK_S * 2.6, abs=1e-12)
-    assert earliest_brake_angle(22, 2.6, 20 * SECTOR + D(22)) == pytest.approx(D(-22.007),
-                                                                               abs=1e-5)
+    # 2 ticks at 2.6 rad/s: 0.01733 rad = 0.993 deg, so -23 + 0.993 = -22.007 deg
+    assert dec.command.phi_a == pytest.approx(D(-22.007), abs=D(0.001))
     # pad 22 braking (on at -22.4 deg), off at -6 deg: pad 23 is at -28.5 deg there, so
     # -22.4 deg is allowed as it is
     xi1 = 22 * SECTOR - D(22.4)
@@ -63,14 +63,27 @@ def test_braking_pad_switches_on_no_earlier_than_it_still_can():
     dec = mpc.brake_now(xi1, 2.6, 0.0, act_counter=D(5))
     arrival = xi1 + 2.6 * (TICK_S + mpc.config.deadline_margin)
     assert dec.braking and dec.command.n_a == 7
-    assert dec.command.phi_a == pytest.approx(arrival - 23 * SECTOR + 2 * TICK_S * 2.6)
-    assert D(-21) < dec.command.phi_a < D(-20.5)
+    # arrival: 2.6 rad/s x (3.33 + 4) ms = 0.01907 rad = 1.093 deg; 22.2 + 1.093 - 45 + 0.993
+    assert arrival == pytest.approx(22 * SECTOR + D(0.793), abs=D(0.001))
+    assert dec.command.phi_a == pytest.approx(D(-20.714), abs=D(0.001))
     assert dec.deadline_slack == pytest.approx(D(5) / 2.6 - mpc.config.deadline_margin
                                                - dec.compute_time)
     # an idle wheel whose telemetry names a pending target less than a sector ahead: no pad
     # is on, so the command latches on arrival too (not at that target's switch-off)
     dec = mpc.decide(xi1, 2.6, 22, D(10), D(22), reference=2.0, pad_on=False)
     assert dec.command.n_a == 7 and dec.command.phi_a < D(-20.5)
+
+
+@pytest.mark.parametrize("speed", [0.5, 2.6, 8.0, 20.0, 40.0])
+@pytest.mark.parametrize("phi_a, phi_d", [(D(-22.4), D(-6)), (D(-22), D(-20)), (D(-3), D(-1))])
+def test_braking_command_is_valid_and_still_ahead_at_any_latch_angle(speed, phi_a, phi_d):
+    # over a whole sector of latch angles: phi_a within [brake_phi_a, phi_d), and the pad's
+    # switch-on at least the 2 ticks' margin ahead of the latch (never one that has passed)
+    for latch in np.linspace(5 * SECTOR, 6 * SECTOR, 181):
+        pad, pa = braking_command(latch, speed, phi_a, phi_d)
+        assert phi_a <= pa < phi_d
+        assert pad * SECTOR + pa >= latch + 2 * TICK_S * speed - 1e-12
+        assert earliest_brake_angle(pad, speed, latch) <= 0.5 * (phi_a + phi_d)
 
 
 def test_next_pad_is_the_first_whose_switch_on_is_still_ahead():
