@@ -4,7 +4,9 @@ Prints, on one core:
 * one wheel through ``Plant.step`` (the embedded runner's loop), effects off and all on:
   simulated seconds per wall second (target >= 200x real time);
 * N wheels / parameter sets advanced together by the compiled batch integrator:
-  wheel-seconds per wall second (target >= 20,000 at N = 256).
+  wheel-seconds per wall second (target >= 20,000 at N = 256);
+* where a batch tick goes (bookkeeping against the force law), and the same batch compiled
+  as before ``jit.jit_kernel`` (reference counting on, tick not inlined) for comparison.
 
 Run: ``./dev bench`` or ``.venv/bin/python benchmarks/bench_model.py``.
 """
@@ -70,6 +72,29 @@ def batch(n_wheels: int, seconds: float = 20.0, repeats: int = 3, fn=simulate_ba
     return best
 
 
+def refcounted_batch():
+    """simulate_batch as it was before ``jit.jit_kernel``: the tick function compiled with
+    numba's reference counting on and called, not inlined, once per tick.  The same
+    arithmetic (bit-identical results); only the compilation differs."""
+    import numba
+
+    from hasel_wheel_sim import integrator
+
+    tick = numba.njit(nogil=True)(integrator._advance)
+
+    @numba.njit(nogil=True)
+    def run(states, pvs, h, n_ticks, out):
+        ev = np.zeros((L.EV_MAX_PER_TICK, 4))
+        for i in range(states.shape[0]):
+            s, pv, o = states[i], pvs[i], out[i]
+            for k in range(n_ticks):
+                tick(s, pv, h, ev)
+                o[k, 0] = s[L.S_XI1]
+                o[k, 1] = s[L.S_XI2]
+                o[k, 2] = s[L.S_Q]
+    return run
+
+
 def libm_floor_ns(n: int = 5_000_000) -> float:
     """Measured cost [ns] of one log + exp + sin in compiled code (what one force-law call needs)."""
     from hasel_wheel_sim.jit import jit
@@ -126,6 +151,10 @@ def main() -> None:
     print(f"  batch N =   256, {len(cores)} cores (prange)   : {par:8.0f} wheel-s per wall-s"
           f"   (target 20,000: {par / 20000:5.1f}x of target)")
     bare = batch(256, force_law=False)
+    before = refcounted_batch()
+    batch(4, 1.0, 1, before)                                    # compile outside the timing
+    before_rate = batch(256, fn=before)
+    before_bare = batch(256, fn=before, force_law=False)
     ns = libm_floor_ns()
     tick_ns = 1e9 / rates[256] / 300
     bare_ns = 1e9 / bare / 300
@@ -133,6 +162,8 @@ def main() -> None:
     print(f"  law (bookkeeping only: {bare:6.0f} wheel-s per wall-s) {bare_ns:5.0f} ns; "
           f"one log + exp + sin costs {ns:.1f} ns,")
     print("  and an RK4 step evaluates the force law 4 times while an actuator is on (~half the time)")
+    print(f"  the same batch compiled as before jit_kernel (reference counting on, tick not inlined): "
+          f"{before_rate:6.0f} wheel-s per wall-s, bookkeeping {1e9 / before_bare / 300:4.0f} ns per tick")
     call_us, elem_ns = numpy_costs()
     print(f"  numpy instead (why the batch is compiled): {call_us:.2f} us per call at N = 256, "
           f"{elem_ns:.1f} ns per element for log+exp+sin;")

@@ -244,8 +244,8 @@ def _advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
 
 #: One tick of one wheel (``_advance``), called from Python, the plant and the MPC.
 advance = jit_kernel(_advance)
-#: The same function inlined into :func:`run_wheel`'s loop: the batch's per-tick bookkeeping
-#: (everything but the force law) fell from ~58 to ~44 ns per tick (bench_model.py).
+#: The same function inlined into :func:`run_wheel`'s loop, which saves a call per tick
+#: (bench_model.py prints the batch's bookkeeping per tick, and the old way's).
 _advance_inline = jit_inline(_advance)
 
 

@@ -79,9 +79,9 @@ def jit_kernel(fn: Callable[..., Any]) -> Callable[..., Any]:
     For compiled loops that allocate nothing.  Such a function never owns an array, yet with
     NRT on, numba increments and decrements the count of every array it passes to an inlined
     call: a few atomic operations per RK4 stage, which cost more than the whole flow map
-    without actuation (bench_model.py: ~100 ns -> ~55 ns per tick).  A function marked so
-    that tries to allocate fails to compile, so the mark cannot cause a leak or a dangling
-    array (tested).
+    without actuation (bench_model.py runs the batch both ways).  A function marked so that
+    tries to allocate fails to compile, so the mark cannot cause a leak or a dangling array
+    (tested).
     """
     if HAVE_NUMBA:
         return numba.njit(cache=bool(numba.config.CACHE_DIR), nogil=True, _nrt=False)(fn)
