@@ -115,7 +115,7 @@ def main() -> None:
     profile, duration = ((0.0, 1.0), (20.0, 1.5)), 40.0
     for label, kw in (("default observer", {}),
                       ("observer without its disturbance state",
-                       {"observer_config": ObserverConfig(disturbance_rate=0.0)})):
+                       {"observer_config": ObserverConfig(disturbance_rate=0.0, pivot_rate=0.0)})):
         m = compare_controllers(None, plant, models, profile, duration, **kw)
         ratio = m["true"]["rmse"] / m["nominal"]["rmse"]
         print(f"closed loop on a COM plant, {label}: tracking RMSE nominal "

@@ -21,6 +21,7 @@ from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.wheel import TICK
 
 from .controller import START_ANGLES, ControllerConfig, SpeedController
+from .disturbance import TRACKING_GAIN
 from .mpc import MpcConfig
 from .observer import ObserverConfig
 from .segments import SegmentMetrics, SegmentTracker  # noqa: F401  (SegmentMetrics: re-export)
@@ -55,7 +56,7 @@ class LoopLog:
 
 def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
                     plant_config: PlantConfig | None = None, params: WheelParams | None = None,
-                    estimator_gain: float | None = 0.1, speed_source: str = "observer",
+                    estimator_gain: float | None = TRACKING_GAIN, speed_source: str = "observer",
                     mpc_config: MpcConfig | None = None, w0: float = 1.0,
                     estimator_mode: str = "tracking", observer_config=None,
                     recorder=None, ns: str = "/wheel0",
@@ -83,7 +84,7 @@ def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
     return run_controller(cfg, profile, duration, plant_config, params, w0, recorder, ns, clock)
 
 
-def controller_config(estimator_gain: float | None = 0.1, speed_source: str = "observer",
+def controller_config(estimator_gain: float | None = TRACKING_GAIN, speed_source: str = "observer",
                       mpc_config: MpcConfig | None = None, estimator_mode: str = "tracking",
                       observer_config: ObserverConfig | None = None,
                       controller_params: WheelParams | None = None,

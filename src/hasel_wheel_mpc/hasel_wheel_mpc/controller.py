@@ -28,7 +28,7 @@ from hasel_wheel_sim.model_file import extensions_to_yaml_dict, model_from_mappi
 from hasel_wheel_sim.params import ParameterError, WheelParams
 from hasel_wheel_sim.wheel import TICK
 
-from .disturbance import IntegralEstimator
+from .disturbance import TRACKING_GAIN, IntegralEstimator
 from .mpc import Decision, Mpc, MpcConfig, next_pad
 from .observer import Estimate, Observer, ObserverConfig
 
@@ -55,7 +55,7 @@ class ControllerConfig:
     extensions: Extensions = field(default_factory=Extensions)
     observer: ObserverConfig = field(default_factory=ObserverConfig)
     mpc: MpcConfig = field(default_factory=MpcConfig)
-    estimator_gain: float | None = 0.1       # K [1 per cycle]
+    estimator_gain: float | None = TRACKING_GAIN   # K [1 per cycle]
     estimator_mode: str = "tracking"         # 'tracking' or 'paper' ((57)-(58))
     estimator_gate: float = 0.64             # [rad/s]
     speed_source: str = "observer"
@@ -150,7 +150,8 @@ class ControllerConfig:
 
 
 #: ROS parameters of observer_node / mpc_node that are fields of ObserverConfig / MpcConfig.
-OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_rate")
+OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_rate",
+                   "pivot_rate")
 MPC_PARAMS = ("brake_threshold", "brake_phi_a", "brake_phi_d", "terminal_weight",
               "time_weighted", "deadline_margin", "max_horizon", "phi_a_min", "phi_a_max")
 

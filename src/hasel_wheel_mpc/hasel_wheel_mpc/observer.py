@@ -49,6 +49,8 @@ class ObserverConfig:
     window: int = 300               # samples over which the quality is judged [1]
     disturbance_rate: float = 0.05  # random-walk intensity of each disturbance coefficient
                                     # (c, a, b) [rad/s^2 per sqrt(s)]; 0 = no disturbance state
+    pivot_rate: float = 0.05        # the same for the pivot harmonic (e, f) [rad/s^2 per
+                                    # sqrt(s)]; 0 = none
     reacquire_after: int = 30       # this many outliers in a row mean the estimate lost the
                                     # wheel (started on a fast wheel, a long dropout): restart
                                     # from those samples' line fit [samples]; 0 = never
@@ -69,17 +71,20 @@ class Estimate(NamedTuple):
     quality: float
     accel_disturbance: float = 0.0      # a_d at xi1: unmodelled acceleration [rad/s^2]
     accel_disturbance_std: float = 0.0  # one-sigma uncertainty of its constant part [rad/s^2]
-    accel_coefficients: tuple = (0.0, 0.0, 0.0)   # (c, a, b) of a_d [rad/s^2]
+    accel_coefficients: tuple = (0.0,) * 5   # (c, a, b, e, f) of a_d [rad/s^2]
 
 
 class Observer:
-    """EKF on (xi1, xi2, c, a, b) with the hybrid model as its process model.
+    """EKF on (xi1, xi2, c, a, b, e, f) with the hybrid model as its process model.
 
-    a_d(xi1) = c + a cos(xi1) + b sin(xi1) [rad/s^2] is the acceleration the model does not
-    explain: a constant part (charge retention, drag, a platform pulling) and a once-per-turn
-    part (an off-centre mass; the paper trims its wheel's COM with weights for this reason).
-    c, a, b are slow random walks.  a_d is added to the model's acceleration in the
-    prediction, and the MPC predicts with it too.
+    a_d = c + a cos(xi1) + b sin(xi1) + e cos(psi) + f sin(psi) [rad/s^2], psi = (r/L) xi1
+    the pivot arm's angle (eq. (8)), is the acceleration the model does not explain: a
+    constant part (charge retention, drag), a once-per-turn part (an off-centre mass; the
+    paper trims its wheel's COM with weights for this reason) and a once-per-lap part (whatever
+    is fixed to the room the wheel circles in: a sloping floor, a tether, the cable to the
+    arm).  The lap is 1/(r/L) = 4.1 turns, 26 s at 1 rad/s: slower than a cycle, too fast for
+    the constant part to follow without lag.  The coefficients are slow random walks.  a_d is
+    added to the model's acceleration in the prediction, and the MPC predicts with it too.
     """
 
     def __init__(self, params: WheelParams | None = None, extensions: Extensions | None = None,
@@ -89,8 +94,8 @@ class Observer:
         self.pv = param_vector(self.params, extensions)
         self._s = initial_state()          # scratch state for the flow: q, eta, phi_a, on-time
         self._commands: dict[int, tuple[float, float]] = {}
-        self.x: np.ndarray | None = None    # (xi1 [rad], xi2 [rad/s], c, a, b [rad/s^2])
-        self.P = np.zeros((5, 5))
+        self.x: np.ndarray | None = None    # (xi1 [rad], xi2 [rad/s], c, a, b, e, f [rad/s^2])
+        self.P = np.zeros((N_STATES, N_STATES))
         self._pv = self.pv.copy()           # the model with the current a_d as a torque
         self.t = 0.0
         self.on_since = 0.0
@@ -112,7 +117,7 @@ class Observer:
         return self._commands.get(seq, (self.config.default_phi_a, self.config.default_phi_d))
 
     def _flow(self, x: np.ndarray, dt: float, s: np.ndarray) -> tuple[float, float]:
-        set_disturbance(self._pv, self.pv, x[2:5])
+        set_disturbance(self._pv, self.pv, x[2:])
         return rk4(float(x[0]), float(x[1]), dt, s, 1.0, self._pv)
 
     def step(self, z: TelemetrySample) -> Estimate:
@@ -121,9 +126,9 @@ class Observer:
         r = (COUNT * COUNT) / 12.0 + c.encoder_noise ** 2
         meas = z.angle + 0.5 * COUNT           # middle of the count the encoder floored into
         if self.x is None:
-            self.x = np.array([meas, 0.0, 0.0, 0.0, 0.0])
-            a_var = c.initial_disturbance_std ** 2 if c.disturbance_rate > 0.0 else 0.0
-            self.P = np.diag([r, c.initial_speed_std ** 2, a_var, a_var, a_var])
+            self.x = np.zeros(N_STATES)
+            self.x[0] = meas
+            self.P = np.diag([r, c.initial_speed_std ** 2, *self._disturbance_var()])
             self.t = z.t
             self._prev = z
             return self._estimate(z)
@@ -170,10 +175,15 @@ class Observer:
         c = self.config
         r = (COUNT * COUNT) / 12.0 + c.encoder_noise ** 2
         self.x[0], self.x[1] = intercept, speed
-        a_var = c.initial_disturbance_std ** 2 if c.disturbance_rate > 0.0 else 0.0
-        self.P = np.diag([r, (COUNT / (t[-1] - t[0])) ** 2 + r, a_var, a_var, a_var])
+        self.P = np.diag([r, (COUNT / (t[-1] - t[0])) ** 2 + r, *self._disturbance_var()])
         self.reacquisitions += 1
         self._run = []
+
+    def _disturbance_var(self) -> list[float]:
+        """First variances of (c, a, b, e, f) [(rad/s^2)^2]: 0 for coefficients switched off."""
+        c = self.config
+        v = c.initial_disturbance_std ** 2
+        return [v if c.disturbance_rate > 0.0 else 0.0] * 3 + [v if c.pivot_rate > 0.0 else 0.0] * 2
 
     def _predict(self, dt: float, prev: TelemetrySample) -> None:
         s = self._s
@@ -186,27 +196,26 @@ class Observer:
         x1, v1 = self._flow(x, dt, s)
         # Jacobian of the flow by central differences (the flow is smooth within a mode)
         e1, e2 = 1e-6, 1e-6
-        z3 = (0.0, 0.0, 0.0)
-        a = self._flow(x + (e1, 0.0, *z3), dt, s)
-        b = self._flow(x - (e1, 0.0, *z3), dt, s)
-        cc = self._flow(x + (0.0, e2, *z3), dt, s)
-        d = self._flow(x - (0.0, e2, *z3), dt, s)
-        F = np.eye(5)
+        z = (0.0,) * (N_STATES - 2)
+        a = self._flow(x + (e1, 0.0, *z), dt, s)
+        b = self._flow(x - (e1, 0.0, *z), dt, s)
+        cc = self._flow(x + (0.0, e2, *z), dt, s)
+        d = self._flow(x - (0.0, e2, *z), dt, s)
+        F = np.eye(N_STATES)
         F[0, 0] = (a[0] - b[0]) / (2 * e1)
         F[0, 1] = (cc[0] - d[0]) / (2 * e2)
         F[1, 0] = (a[1] - b[1]) / (2 * e1)
         F[1, 1] = (cc[1] - d[1]) / (2 * e2)
-        # a_d enters as an added acceleration: d/d(c, a, b) = (dt^2/2, dt) x (1, cos, sin)
-        basis = (1.0, math.cos(x[0]), math.sin(x[0]))
-        for j in range(3):
-            F[0, 2 + j] = dt * dt / 2.0 * basis[j]
-            F[1, 2 + j] = dt * basis[j]
-        qa = self.config.accel_noise ** 2
-        Q = np.zeros((5, 5))
-        Q[:2, :2] = qa * np.array([[dt ** 3 / 3.0, dt ** 2 / 2.0], [dt ** 2 / 2.0, dt]])
-        if self.config.disturbance_rate > 0.0:
-            Q[2:, 2:] = self.config.disturbance_rate ** 2 * dt * np.eye(3)
-        self.x = np.array([x1, v1, x[2], x[3], x[4]])
+        # a_d enters as an added acceleration: d/d(c, a, b, e, f) = (dt^2/2, dt) x basis
+        basis = disturbance_basis(float(x[0]), self.pv[L.P_PIVOT_RATIO])
+        F[0, 2:] = dt * dt / 2.0 * basis
+        F[1, 2:] = dt * basis
+        cfg = self.config
+        Q = np.zeros((N_STATES, N_STATES))
+        Q[:2, :2] = cfg.accel_noise ** 2 * np.array([[dt ** 3 / 3.0, dt ** 2 / 2.0],
+                                                     [dt ** 2 / 2.0, dt]])
+        Q[2:, 2:] = np.diag([cfg.disturbance_rate ** 2] * 3 + [cfg.pivot_rate ** 2] * 2) * dt
+        self.x = np.array([x1, v1, *x[2:]])
         self.P = F @ self.P @ F.T + Q
 
     def _estimate(self, z: TelemetrySample) -> Estimate:
@@ -219,26 +228,49 @@ class Observer:
         quality = max(0.0, 1.0 - 5.0 * bad)
         return Estimate(z.t, xi1, float(self.x[1]), z.q, act, deact, z.eta_unwrapped, 0.0,
                         float(math.sqrt(max(self.P[1, 1], 0.0))), quality,
-                        disturbance_at(self.x[2:5], xi1),
+                        disturbance_at(self.x[2:], xi1, self.pv[L.P_PIVOT_RATIO]),
                         float(math.sqrt(max(self.P[2, 2], 0.0))),
-                        tuple(float(v) for v in self.x[2:5]))
+                        tuple(float(v) for v in self.x[2:]))
 
 
-def disturbance_at(coefficients, xi1: float) -> float:
-    """a_d(xi1) = c + a cos(xi1) + b sin(xi1) [rad/s^2] for coefficients (c, a, b)."""
-    c, a, b = coefficients
-    return float(c + a * math.cos(xi1) + b * math.sin(xi1))
+#: The observer's states: xi1, xi2 and the five coefficients of a_d.
+N_STATES = 7
+_BIAS = (L.P_BIAS_TORQUE, L.P_BIAS_COS, L.P_BIAS_SIN, L.P_BIAS_PIVOT_COS, L.P_BIAS_PIVOT_SIN)
+
+
+def disturbance_basis(xi1: float, pivot_ratio: float) -> np.ndarray:
+    """(1, cos xi1, sin xi1, cos psi, sin psi), psi = pivot_ratio * xi1: shape (5,)."""
+    psi = pivot_ratio * xi1
+    return np.array([1.0, math.cos(xi1), math.sin(xi1), math.cos(psi), math.sin(psi)])
+
+
+def disturbance_at(coefficients, xi1: float, pivot_ratio: float = 0.0) -> float:
+    """a_d [rad/s^2] at wheel angle xi1 [rad] for coefficients (c, a, b) or (c, a, b, e, f)
+    [rad/s^2]; ``pivot_ratio`` r/L [1] turns xi1 into the pivot angle of e and f."""
+    basis = disturbance_basis(xi1, pivot_ratio)[:len(coefficients)]
+    return float(np.dot(basis, coefficients))
+
+
+def fold_pivot(coefficients, xi1: float, pivot_ratio: float) -> tuple[float, float, float]:
+    """(c, a, b, e, f) [rad/s^2] -> (c + e cos psi + f sin psi, a, b) with psi = pivot_ratio *
+    xi1: the pivot harmonic as a constant, its value at wheel angle ``xi1`` [rad]."""
+    c, a, b, e, f = coefficients
+    psi = pivot_ratio * xi1
+    return (float(c + e * math.cos(psi) + f * math.sin(psi)), float(a), float(b))
 
 
 def set_disturbance(pv: np.ndarray, base: np.ndarray, coefficients) -> np.ndarray:
-    """Write the acceleration disturbance (c, a, b) [rad/s^2] into ``pv`` as torques [N*m].
+    """Write the acceleration disturbance (c, a, b) or (c, a, b, e, f) [rad/s^2] into ``pv``
+    as torques [N*m] (missing coefficients are 0).
 
     ``base`` is the model's own parameter vector (its inertia converts); returns ``pv``.
     """
+    if len(coefficients) not in (3, 5):
+        raise ValueError(f"disturbance coefficients {tuple(coefficients)!r}: expected (c, a, b) "
+                         f"or (c, a, b, e, f) [rad/s^2]")
     inertia = 1.0 / base[L.P_INV_INERTIA]
-    pv[L.P_BIAS_TORQUE] = coefficients[0] * inertia
-    pv[L.P_BIAS_COS] = coefficients[1] * inertia
-    pv[L.P_BIAS_SIN] = coefficients[2] * inertia
+    for j, i in enumerate(_BIAS):
+        pv[i] = coefficients[j] * inertia if j < len(coefficients) else 0.0
     return pv
 
 

@@ -29,7 +29,7 @@ from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_
                                                  text_param)
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
-from .disturbance import IntegralEstimator
+from .disturbance import TRACKING_GAIN, IntegralEstimator
 from .node_model import declare_controller_model
 from .observer import Observer, ObserverConfig
 
@@ -64,8 +64,12 @@ class ObserverNode(Node):
             "disturbance_rate", defaults.disturbance_rate,
             float_param("random-walk intensity of the acceleration disturbance (c, a, b) "
                         "[rad/s^2 per sqrt(s)]; 0 = no disturbance state", 0.0, 10.0, True)).value
+        pivot_rate = self.declare_parameter(
+            "pivot_rate", defaults.pivot_rate,
+            float_param("random-walk intensity of the once-per-pivot-lap disturbance (e, f) "
+                        "[rad/s^2 per sqrt(s)]; 0 = none", 0.0, 10.0, True)).value
         gain = self.declare_parameter(
-            "estimator_gain", 0.1,
+            "estimator_gain", TRACKING_GAIN,
             float_param("gain K of the disturbance estimator (57)-(58) [1 per cycle]; "
                         "0 = estimator off", 0.0, 1.99)).value
         mode = self.declare_parameter(
@@ -84,7 +88,7 @@ class ObserverNode(Node):
         self.frame_id = self.get_parameter("frame_id").value
         self.obs = Observer(params, ext, config=ObserverConfig(
             accel_noise=accel_noise, encoder_noise=encoder_noise, gate_sigma=gate_sigma,
-            disturbance_rate=disturbance_rate))
+            disturbance_rate=disturbance_rate, pivot_rate=pivot_rate))
         if mode not in ESTIMATOR_MODES:
             raise ParameterError(f"estimator_mode = {mode!r}: expected one of {ESTIMATOR_MODES}")
         self.est = IntegralEstimator(gain=gain, gate=gate, mode=mode) if gain > 0.0 else None

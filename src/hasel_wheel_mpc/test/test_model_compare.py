@@ -39,9 +39,10 @@ def default_observer():
 
 @pytest.fixture(scope="module")
 def no_disturbance_state():
-    """Both models with the observer's acceleration-disturbance state (c, a, b) off."""
+    """Both models with the observer's acceleration-disturbance states (c, a, b, e, f) off."""
     return compare_controllers(None, PLANT, MODELS, PROFILE, DURATION,
-                               observer_config=ObserverConfig(disturbance_rate=0.0))
+                               observer_config=ObserverConfig(disturbance_rate=0.0,
+                                                                 pivot_rate=0.0))
 
 
 def test_metrics_are_sane(default_observer):

@@ -80,22 +80,73 @@ def test_observer_recovers_a_known_off_centre_mass():
                                    "phase": {"value": phase, "unit": "rad"}})
     *_, obs = run(fx, seconds=60.0)
     amp = torque / WheelParams().inertia                   # 0.112 rad/s^2
-    c, a, b = obs.x[2:5]
+    c, a, b, e, f = obs.x[2:]
     assert abs(c) < 0.3 * amp                              # no constant part was added
     assert a == pytest.approx(-amp * math.sin(phase), abs=0.2 * amp)
     assert b == pytest.approx(-amp * math.cos(phase), abs=0.2 * amp)
+    assert math.hypot(e, f) < 0.2 * amp                    # nor a once-per-lap part
+
+
+def test_observer_recovers_a_known_platform_disturbance():
+    # platform_disturbance: torque T sin(psi + phase), psi = (r/L) xi1 the pivot angle, i.e.
+    # a_d = (T/I)(sin(phase) cos psi + cos(phase) sin psi); one lap is 4.1 turns, ~13 s here
+    from hasel_wheel_sim.params import WheelParams
+    torque, phase = 0.002, -1.0
+    fx = dict(ENCODER, platform_disturbance={"enabled": True,
+                                             "torque": {"value": torque, "unit": "N*m"},
+                                             "phase": {"value": phase, "unit": "rad"}})
+    *_, obs = run(fx, seconds=40.0)
+    amp = torque / WheelParams().inertia                   # 0.056 rad/s^2
+    c, a, b, e, f = obs.x[2:]
+    assert e == pytest.approx(amp * math.sin(phase), abs=0.15 * amp)
+    assert f == pytest.approx(amp * math.cos(phase), abs=0.15 * amp)
+    assert math.hypot(a, b) < 0.3 * amp       # no once-per-turn part (c is not asserted: it
+    # also carries the switching the observer sees only at samples, -0.02 to -0.05 rad/s^2 here)
+
+
+def test_the_pivot_harmonic_as_a_constant_and_as_torques():
+    from hasel_wheel_mpc.observer import disturbance_at, fold_pivot, set_disturbance
+    from hasel_wheel_sim import layout as L
+    from hasel_wheel_sim.model import external_torque, param_vector
+    coef = (0.01, -0.02, 0.03, 0.04, -0.05)       # c, a, b, e, f [rad/s^2]
+    ratio, xi1 = 0.25, 2.0                        # psi = 0.5 rad
+    want = (0.01 - 0.02 * math.cos(2.0) + 0.03 * math.sin(2.0)
+            + 0.04 * math.cos(0.5) - 0.05 * math.sin(0.5))
+    assert disturbance_at(coef, xi1, ratio) == pytest.approx(want, rel=1e-12)
+    folded = fold_pivot(coef, xi1, ratio)
+    assert folded[1:] == coef[1:3]
+    assert disturbance_at(folded, xi1) == pytest.approx(want, rel=1e-12)
+    from hasel_wheel_sim.params import WheelParams
+    base = param_vector(WheelParams())
+    pv = set_disturbance(base.copy(), base, coef)
+    torque = external_torque(xi1, 0.0, pv) * base[L.P_INV_INERTIA]
+    assert torque == pytest.approx(disturbance_at(coef, xi1, base[L.P_PIVOT_RATIO]), rel=1e-12)
+    with pytest.raises(ValueError, match=r"expected \(c, a, b\) or \(c, a, b, e, f\)"):
+        set_disturbance(base.copy(), base, (0.0, 0.0))
 
 
 def test_without_the_disturbance_state_the_coefficients_stay_zero():
     p = Plant(config=PlantConfig(seed=1, effects=effects_from_mapping(ENCODER)), xi2=1.0)
     p.open_loop(D(9), D(22))
     obs = Observer(config=ObserverConfig(default_phi_a=D(9), disturbance_rate=0.0,
-                                         initial_disturbance_std=0.0))
+                                         pivot_rate=0.0))
     for _ in range(600):
         s = p.step()
         if s is not None:
             e = obs.step(s)
-    assert e.accel_coefficients == (0.0, 0.0, 0.0)
+    assert e.accel_coefficients == (0.0,) * 5
+
+
+def test_without_the_pivot_harmonic_its_coefficients_stay_zero():
+    p = Plant(config=PlantConfig(seed=1, effects=effects_from_mapping(ENCODER)), xi2=1.0)
+    p.open_loop(D(9), D(22))
+    obs = Observer(config=ObserverConfig(default_phi_a=D(9), pivot_rate=0.0))
+    for _ in range(600):
+        s = p.step()
+        if s is not None:
+            e = obs.step(s)
+    assert e.accel_coefficients[3:] == (0.0, 0.0)
+    assert e.accel_coefficients[0] != 0.0
 
 
 @pytest.mark.parametrize("reacquire", [30, 0])

@@ -174,7 +174,7 @@ def test_the_packaged_ros_parameter_files_are_the_core_defaults():
     mpc = packaged("hasel_wheel_mpc", "mpc.yaml").read_text()
     assert controller_from_ros_files(obs, mpc) == ControllerConfig()
     changed = controller_from_ros_files(
-        obs.replace("accel_noise: 0.05", "accel_noise: 0.08").replace("estimator_gain: 0.1",
+        obs.replace("accel_noise: 0.05", "accel_noise: 0.08").replace("estimator_gain: 0.07",
                                                                       "estimator_gain: 0.0"),
         mpc.replace("brake_threshold: 0.3", "brake_threshold: 0.25"))
     assert changed.observer.accel_noise == 0.08 and changed.estimator_gain is None

@@ -65,7 +65,8 @@ def prediction_residual(trial: Trial, params: WheelParams, ext: Extensions | Non
     samples instead of being tracked away."""
     if duration is not None and trial.duration > duration:
         trial = trial.slice(0, int(np.searchsorted(trial.t, trial.t[0] + duration)), trial.name)
-    obs = Observer(params, ext, ObserverConfig(disturbance_rate=0.0, accel_noise=accel_noise))
+    obs = Observer(params, ext, ObserverConfig(disturbance_rate=0.0, pivot_rate=0.0,
+                                              accel_noise=accel_noise))
     for i, a in enumerate(trial.activations):
         obs.command_sent(i, a.phi_a, a.phi_d)
     n = trial.t.shape[0]
