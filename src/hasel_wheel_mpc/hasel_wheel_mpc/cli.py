@@ -83,6 +83,8 @@ def _fresh_bag_dir(out: Path) -> Path | None:
 def cmd_demo(args: argparse.Namespace) -> int:
     """Closed-loop demo: run, record, plot, print the metrics beside the paper's."""
     from .closed_loop import controller_config
+    from hasel_wheel_sim.effects import EFFECT_FIELDS
+
     from .closed_loop_demo import VARIANTS, metrics_table, plot, run_variants
 
     plant_cfg = dataclasses.replace(load_plant_config(args.plant), switching="tick")
@@ -111,7 +113,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     finally:
         rec.close()
     wall = time.perf_counter() - t0
-    print(metrics_table(results))
+    print(metrics_table(results, [e for e in EFFECT_FIELDS if e in plant_cfg.effects.enabled]))
     pngs = plot(results, out)
     sim = results[0].log.t[-1] * len(results)
     print(f"Plots: {', '.join(str(p) for p in pngs)}")

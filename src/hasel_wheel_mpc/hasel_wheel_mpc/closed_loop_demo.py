@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import textwrap
 from pathlib import Path
 from typing import NamedTuple
 
@@ -73,11 +74,13 @@ def _f(v, spec):
     return "   -  " if v is None or (isinstance(v, float) and math.isnan(v)) else format(v, spec)
 
 
-def metrics_table(results: list[VariantResult]) -> str:
-    """Text table: per reference, each variant's steady error, NRMSE, rise/fall, and the paper."""
-    lines = ["Closed loop on the plant with effects on (10-bit encoder, charge retention, actuator",
-             "spread, off-centre mass, drag, latency, glitches, dropouts); steady window = last 10 s",
-             "of each hold; rise/fall = from the step until the new reference is first reached.", ""]
+def metrics_table(results: list[VariantResult], effects: list[str] | None = None) -> str:
+    """Text table: per reference, each variant's steady error, NRMSE, rise/fall, and the paper.
+    ``effects``: the names of the plant's enabled effects, for the heading."""
+    on = ", ".join(effects) if effects else "none"
+    lines = textwrap.wrap(f"Closed loop on the plant with these effects on: {on}.", 90) + [
+        "Steady window = last 10 s of each hold; rise/fall = from the step until the new "
+        "reference", "is first reached.", ""]
     for res in results:
         lines.append(f"{res.label}:")
         lines.append("  ref [rad/s] | steady err [%] | NRMSE | rise/fall [s] | paper: err [%], NRMSE"
