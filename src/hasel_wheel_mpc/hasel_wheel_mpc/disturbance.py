@@ -27,7 +27,7 @@ from dataclasses import dataclass
 #: The default gain K of the tracking estimator [1 per cycle].  With the observer's pivot
 #: harmonic carrying the platform's pull, a faster d only chases what the MPC cannot hold
 #: from one cycle to the next: on plant seeds 0-15 at 1.0 rad/s the demo's steady error is
-#: within 0.5 % on 14 seeds with K = 0.07, 11 with 0.05, 6 of 8 with 0.1.
+#: within 0.5 % on 14 seeds with K = 0.07, on 11 with 0.05 or 0.1 (bench_speed_loop.py).
 TRACKING_GAIN = 0.07
 
 
