@@ -235,7 +235,6 @@ class Observer:
 
 #: The observer's states: xi1, xi2 and the five coefficients of a_d.
 N_STATES = 7
-_BIAS = (L.P_BIAS_TORQUE, L.P_BIAS_COS, L.P_BIAS_SIN, L.P_BIAS_PIVOT_COS, L.P_BIAS_PIVOT_SIN)
 
 
 def disturbance_basis(xi1: float, pivot_ratio: float) -> np.ndarray:
@@ -263,14 +262,24 @@ def set_disturbance(pv: np.ndarray, base: np.ndarray, coefficients) -> np.ndarra
     """Write the acceleration disturbance (c, a, b) or (c, a, b, e, f) [rad/s^2] into ``pv``
     as torques [N*m] (missing coefficients are 0).
 
+    c, a, b go into the bias slots.  The pivot pair e cos psi + f sin psi joins the model's
+    own platform term T sin(psi + phase) of ``base`` as one sinusoid, so the compiled flow
+    evaluates no extra term for it (the plant, which has no estimate, pays nothing).
     ``base`` is the model's own parameter vector (its inertia converts); returns ``pv``.
     """
     if len(coefficients) not in (3, 5):
         raise ValueError(f"disturbance coefficients {tuple(coefficients)!r}: expected (c, a, b) "
                          f"or (c, a, b, e, f) [rad/s^2]")
     inertia = 1.0 / base[L.P_INV_INERTIA]
-    for j, i in enumerate(_BIAS):
-        pv[i] = coefficients[j] * inertia if j < len(coefficients) else 0.0
+    pv[L.P_BIAS_TORQUE] = coefficients[0] * inertia
+    pv[L.P_BIAS_COS] = coefficients[1] * inertia
+    pv[L.P_BIAS_SIN] = coefficients[2] * inertia
+    e, f = coefficients[3:5] if len(coefficients) == 5 else (0.0, 0.0)
+    torque, phase = base[L.P_PLATFORM_TORQUE], base[L.P_PLATFORM_PHASE]
+    along_cos = torque * math.sin(phase) + e * inertia       # T sin(psi + phase) =
+    along_sin = torque * math.cos(phase) + f * inertia       #   T sin(phase) cos psi + T cos(phase) sin psi
+    pv[L.P_PLATFORM_TORQUE] = math.hypot(along_cos, along_sin)
+    pv[L.P_PLATFORM_PHASE] = math.atan2(along_cos, along_sin)
     return pv
 
 

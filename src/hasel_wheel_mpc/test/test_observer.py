@@ -121,6 +121,15 @@ def test_the_pivot_harmonic_as_a_constant_and_as_torques():
     pv = set_disturbance(base.copy(), base, coef)
     torque = external_torque(xi1, 0.0, pv) * base[L.P_INV_INERTIA]
     assert torque == pytest.approx(disturbance_at(coef, xi1, base[L.P_PIVOT_RATIO]), rel=1e-12)
+    # with a platform term of its own in the model, the pair adds to it
+    from hasel_wheel_sim.model import Extensions
+    own = param_vector(WheelParams(), Extensions(platform_torque=0.002, platform_phase=1.0))
+    pv = set_disturbance(own.copy(), own, coef)
+    psi = own[L.P_PIVOT_RATIO] * xi1
+    want_torque = (0.002 * math.sin(psi + 1.0)
+                   + disturbance_at(coef, xi1, own[L.P_PIVOT_RATIO]) / own[L.P_INV_INERTIA])
+    assert external_torque(xi1, 0.0, pv) == pytest.approx(want_torque, rel=1e-12)
+    assert set_disturbance(pv, own, coef[:3])[L.P_PLATFORM_TORQUE] == pytest.approx(0.002)
     with pytest.raises(ValueError, match=r"expected \(c, a, b\) or \(c, a, b, e, f\)"):
         set_disturbance(base.copy(), base, (0.0, 0.0))
 

@@ -28,12 +28,10 @@ P_RET_RECOVERY = 18  # [s]
 P_BAND_LO = 19       # |contact angle| band [rad] outside which the force law is < e^-60 of
 P_BAND_HI = 20       #   its peak and is taken as 0 (no effect on any double-precision result)
 P_GAINS = 21         # 16 per-actuator gains [1]
-P_BIAS_TORQUE = P_GAINS + 16   # disturbance torque c + a cos(xi1) + b sin(xi1)
-P_BIAS_COS = P_BIAS_TORQUE + 1  #   + e cos(psi) + f sin(psi), psi = (r/L) xi1 the pivot angle
-P_BIAS_SIN = P_BIAS_TORQUE + 2  #   [N*m]: 0 in the plant; the observer and the MPC's
-P_BIAS_PIVOT_COS = P_BIAS_TORQUE + 3  # prediction carry the observer's estimate here
-P_BIAS_PIVOT_SIN = P_BIAS_TORQUE + 4  # (c, a, b, e, f)
-P_SIZE = P_BIAS_PIVOT_SIN + 1
+P_BIAS_TORQUE = P_GAINS + 16   # disturbance torque c + a cos(xi1) + b sin(xi1) [N*m]: 0 in the
+P_BIAS_COS = P_BIAS_TORQUE + 1  #   plant; the observer and the MPC's prediction carry the
+P_BIAS_SIN = P_BIAS_TORQUE + 2  #   observer's disturbance estimate here (c, a, b)
+P_SIZE = P_BIAS_SIN + 1
 
 # ---- state vector ---------------------------------------------------------------------
 S_T = 0            # simulated time [s]

@@ -146,9 +146,6 @@ def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
         tau -= pv[L.P_VISCOUS] * xi2
     if pv[L.P_BIAS_COS] != 0.0 or pv[L.P_BIAS_SIN] != 0.0:
         tau += pv[L.P_BIAS_COS] * math.cos(xi1) + pv[L.P_BIAS_SIN] * math.sin(xi1)
-    if pv[L.P_BIAS_PIVOT_COS] != 0.0 or pv[L.P_BIAS_PIVOT_SIN] != 0.0:
-        psi = pv[L.P_PIVOT_RATIO] * xi1
-        tau += pv[L.P_BIAS_PIVOT_COS] * math.cos(psi) + pv[L.P_BIAS_PIVOT_SIN] * math.sin(psi)
     return tau + pv[L.P_BIAS_TORQUE]
 
 
