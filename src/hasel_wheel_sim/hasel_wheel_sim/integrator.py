@@ -64,18 +64,22 @@ def rk4(xi1: float, xi2: float, h: float, s: np.ndarray, gain: float,
 
 
 @jit_kernel
-def _locate(s: np.ndarray, gain: float, pv: np.ndarray, h_max: float, target: float,
-            which: int) -> float:
-    """Length in (0, h_max] of the partial RK4 step at which the flow reaches ``target``.
+def _locate(s: np.ndarray, gain: float, pv: np.ndarray, h_max: float, x1: float, v1: float,
+            target: float, which: int) -> tuple[float, float, float]:
+    """Partial RK4 step at which the flow reaches ``target``: (length in (0, h_max] [s],
+    xi1 [rad], xi2 [rad/s] at its end).
 
     ``which`` = 0: xi1 reaches ``target`` (increasing); 1: xi2 reaches 0 (sign change).
-    Safeguarded Newton: a bracket [lo, hi] is kept and bisection used whenever Newton leaves it.
+    (x1, v1) is the full step of length h_max, which the caller has already taken.  The state
+    returned is the RK4 step of the length returned, as computed, so the caller need not
+    repeat it.  Safeguarded Newton: a bracket [lo, hi] is kept and bisection used whenever
+    Newton leaves it.
     """
     x0 = s[L.S_XI1]
     v0 = s[L.S_XI2]
     lo = 0.0
     hi = h_max
-    x1, v1 = rk4(x0, v0, h_max, s, gain, pv)
+    x_hi, v_hi = x1, v1
     if which == 0:
         f_lo = x0 - target
         f_hi = x1 - target
@@ -97,17 +101,18 @@ def _locate(s: np.ndarray, gain: float, pv: np.ndarray, h_max: float, target: fl
             df = acceleration(x, v, s[L.S_Q], s[L.S_ETA], s[L.S_PHI_A], gain,
                               s[L.S_ON_TIME] + hg, pv, 1.0 if v0 > 0.0 else -1.0)
         if which == 0 and abs(f) <= EVENT_TOL:
-            return hg
+            return hg, x, v
         if which == 1 and abs(f) <= 1e-13:
-            return hg
+            return hg, x, v
         if f * sign_lo > 0.0:
             lo = hg
         else:
             hi = hg
+            x_hi, v_hi = x, v
         if hi - lo <= 1e-15:
-            return hi
+            return hi, x_hi, v_hi
         hg = hg - f / df if df != 0.0 else 0.5 * (lo + hi)
-    return hi
+    return hi, x_hi, v_hi
 
 
 @jit_inline
@@ -223,16 +228,18 @@ def _advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
             _flow(s, gain, pv, remaining, x1, v1)
             remaining = 0.0
             break
-        h_sw = _locate(s, gain, pv, remaining, target, 0) if cross else math.inf
-        h_st = _locate(s, gain, pv, remaining, 0.0, 1) if stop else math.inf
+        h_sw, x_sw, v_sw = math.inf, x1, v1
+        h_st, x_st = math.inf, x1
+        if cross:
+            h_sw, x_sw, v_sw = _locate(s, gain, pv, remaining, x1, v1, target, 0)
+        if stop:
+            h_st, x_st, _ = _locate(s, gain, pv, remaining, x1, v1, 0.0, 1)
         if h_sw <= h_st:
-            x, v = rk4(x0, v0, h_sw, s, gain, pv)
-            _flow(s, gain, pv, h_sw, x, v)
+            _flow(s, gain, pv, h_sw, x_sw, v_sw)
             remaining -= h_sw
             n_ev = _switch(s, ev, n_ev)
         else:
-            x, v = rk4(x0, v0, h_st, s, gain, pv)
-            _flow(s, gain, pv, h_st, x, 0.0)
+            _flow(s, gain, pv, h_st, x_st, 0.0)
             remaining -= h_st
             n_ev = _record(ev, n_ev, s, L.EV_STOP)
     if not exact and s[L.S_ARMED] != 0.0:
