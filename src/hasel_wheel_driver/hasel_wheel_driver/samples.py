@@ -52,6 +52,19 @@ class Command(NamedTuple):
         return MODE_BRAKE if self.phi_d <= 0.0 and self.phi_a < 0.0 else MODE_ACCELERATE
 
 
+def pad_edges(q: int, eta_unwrapped: int, prev_q: int, prev_eta: int) -> tuple[bool, bool]:
+    """(switched_on, switched_off) between the previous sample (``prev_q``, ``prev_eta``) and
+    this one (``q``, ``eta_unwrapped``): q 0/1, unwrapped pad indices.
+
+    A new pad with q = 1 in both samples means both edges happened in between: the samples
+    with q = 0 were lost.  Between two pads there can be a single such sample (a small
+    phi_a at speed, e.g. 0.5 deg after 22 deg is one tick at 2.6 rad/s), and one lost sample
+    would otherwise leave the switch-on unseen and the wheel without a next command.
+    """
+    jumped = q == 1 and prev_q == 1 and eta_unwrapped != prev_eta
+    return (q == 1 and prev_q == 0) or jumped, (q == 0 and prev_q == 1) or jumped
+
+
 def header(t: float, frame_id: str = "") -> dict:
     """std_msgs/Header dict for time t [s] (t >= 0)."""
     sec = math.floor(t)

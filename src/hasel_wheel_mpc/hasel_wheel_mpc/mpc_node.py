@@ -113,6 +113,7 @@ class MpcNode(Node):
         self.angles: OrderedDict[int, tuple[float, float]] = OrderedDict()
         self.latched_seq = -1
         self.prev_q = 0
+        self.prev_eta = 0
         self.idle = 0
         self.last_ref = self.reference
         self.new_ref = False
@@ -213,8 +214,8 @@ class MpcNode(Node):
         self.window_estimates += 1
         speed = e.xi2
         self.idle = 0 if e.q else self.idle + 1
-        switched_on = e.q == 1 and self.prev_q == 0
-        self.prev_q = e.q
+        switched_on, _ = samples.pad_edges(e.q, e.eta_unwrapped, self.prev_q, self.prev_eta)
+        self.prev_q, self.prev_eta = e.q, e.eta_unwrapped
         ref = self.reference
         # a new reference counts until the next decision (controller.decision_point)
         self.new_ref = self.new_ref or ref != self.last_ref

@@ -1,7 +1,10 @@
-"""The host-side sequencer decides at switch-on, for the next pad, and only with HV on."""
+"""The host-side sequencer decides at switch-on, for the next pad, and only with HV on; the
+pad edges it (and the controller) reads from two consecutive samples."""
 import math
 
-from hasel_wheel_driver.samples import TelemetrySample
+import pytest
+
+from hasel_wheel_driver.samples import TelemetrySample, pad_edges
 from hasel_wheel_mpc.sequencer import Sequencer
 
 
@@ -40,3 +43,25 @@ def test_restart_counts_from_the_measured_sector_not_a_stale_target():
     # the actuator of interest says 17, but the wheel stopped in sector 5
     s = Sequencer(0.05, 0.38)
     assert s.step(sample(0, 17, angle=5.5 * math.pi / 8)).n_a == 6
+
+
+@pytest.mark.parametrize("prev, now, edges", [
+    ((0, 5), (1, 5), (True, False)),     # switch-on
+    ((1, 5), (0, 6), (False, True)),     # switch-off, next target latched
+    ((1, 5), (1, 5), (False, False)),    # the same pad still on
+    ((0, 6), (0, 6), (False, False)),    # coasting towards it
+    ((1, 5), (1, 6), (True, True)),      # the one q = 0 sample between two pads was lost
+    ((1, 5), (1, 7), (True, True)),      # a braking pad (eta + 2), likewise
+])
+def test_pad_edges_between_two_samples(prev, now, edges):
+    assert pad_edges(now[0], now[1], prev[0], prev[1]) == edges
+
+
+def test_a_switch_on_is_not_missed_when_the_sample_between_two_pads_is_lost():
+    # at speed, with a small phi_a, pads 5 and 6 can be a single tick apart: its sample, the
+    # only one with q = 0, is lost, and the next one already shows pad 6 on
+    s = Sequencer(math.radians(0.5), math.radians(22))
+    s.step(sample(1, 5))
+    assert s.step(sample(1, 5)) is None
+    c = s.step(sample(1, 6))
+    assert c is not None and c.n_a == 7
