@@ -112,6 +112,15 @@ class MpcConfig:
                       self.refine_phi_d)
 
 
+def _at_least(cands: np.ndarray, floor: float) -> np.ndarray:
+    """Rows of ``cands`` (n, 2) whose phi_a [rad] is >= ``floor``; if none is, the row(s) with
+    the largest phi_a, the latest switch-on there is (a wheel too fast for any of them)."""
+    keep = cands[cands[:, 0] >= floor]
+    if len(keep) or not len(cands):
+        return keep
+    return cands[cands[:, 0] == cands[:, 0].max()]
+
+
 def _pairs(phi_a, phi_d) -> np.ndarray:
     rows = [(a, d) for d in phi_d for a in phi_a if a < d]
     return np.array(rows, dtype=float).reshape(-1, 2)
@@ -241,18 +250,20 @@ def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: fl
 
 
 #: Rotation [ticks of 1/300 s at the current speed] between the current pad's switch-off angle
-#: and the braking pad's switch-on angle: the firmware switches off on the first tick past
-#: phi_d and latches the braking target then, so a target less than a tick ahead may already
-#: be behind the wheel, and would only come round again a turn later.
-BRAKE_LATCH_TICKS = 2.0
+#: and the next target's switch-on angle: the firmware switches off on the first tick past
+#: phi_d and latches the next target then, so a target less than a tick ahead may already
+#: be behind the wheel, and would only come round again a turn later (the wheel coasts for
+#: 16 pads).  Driving and braking targets alike.
+LATCH_TICKS = 2.0
 
 
-def earliest_brake_angle(pad: int, xi2: float, latch: float) -> float:
-    """Most negative braking phi_a [rad] at which the (unwrapped) braking ``pad`` can still
-    switch on: its contact angle where the command latches, at the unwrapped wheel angle
-    ``latch`` [rad], plus BRAKE_LATCH_TICKS ticks of rotation at xi2 [rad/s].  A command
-    latches where the current pad switches off, or on arrival if no pad is on."""
-    return latch - pad * SECTOR + BRAKE_LATCH_TICKS * TICK * max(xi2, 0.0)
+def earliest_phi_a(pad: int, xi2: float, latch: float) -> float:
+    """Most negative (braking) or smallest (driving) phi_a [rad] at which the unwrapped
+    ``pad`` can still switch on: its contact angle where the command latches, at the
+    unwrapped wheel angle ``latch`` [rad], plus LATCH_TICKS ticks of rotation at xi2
+    [rad/s].  A command latches where the current pad switches off, or on arrival if no pad
+    is on."""
+    return latch - pad * SECTOR + LATCH_TICKS * TICK * max(xi2, 0.0)
 
 
 def braking_command(latch: float, xi2: float, phi_a: float, phi_d: float) -> tuple[int, float]:
@@ -267,9 +278,9 @@ def braking_command(latch: float, xi2: float, phi_a: float, phi_d: float) -> tup
     """
     limit = 0.5 * (phi_a + phi_d)
     pad = math.floor(latch / SECTOR) + 1
-    while earliest_brake_angle(pad, xi2, latch) > limit:    # each pad is a sector further
+    while earliest_phi_a(pad, xi2, latch) > limit:    # each pad is a sector further
         pad += 1
-    return pad, max(phi_a, earliest_brake_angle(pad, xi2, latch))
+    return pad, max(phi_a, earliest_phi_a(pad, xi2, latch))
 
 
 def next_pad(xi1: float, xi2: float, phi_a: float, lead: float) -> int:
@@ -358,11 +369,16 @@ class Mpc:
         horizon = min(self.config.max_horizon, to_go / max(xi2, 0.3))
         n_ticks = max(int(horizon / TICK), 10)
         cfg = self.config
-        cands = self.cands
+        # a target that latches behind the wheel would wait a whole turn: keep the candidates
+        # that can still switch on after the current pad switches off at phi_d_now (on an idle
+        # wheel the command latches on arrival, and its pad is chosen to suit: next_pad)
+        floor = (earliest_phi_a(eta_unwrapped + 1, xi2, eta_unwrapped * SECTOR + phi_d_now)
+                 if pad_on else -math.inf)
+        cands = _at_least(self.cands, floor)
         costs, means, prefix = self._costs(s, pv, cands, n_ticks, reference, d)
         n = len(cands)
         if np.isfinite(costs).any():
-            fine = cfg.refinement(cands[int(np.argmin(costs)), 0])
+            fine = _at_least(cfg.refinement(cands[int(np.argmin(costs)), 0]), floor)
             if len(fine):
                 c2, m2, _ = self._costs(s, pv, fine, n_ticks, reference, d)
                 cands = np.vstack([cands, fine])

@@ -6,9 +6,11 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_mpc.mpc import (Mpc, MpcConfig, braking_command, cost_59, earliest_brake_angle,
+from hasel_wheel_mpc.mpc import (Mpc, MpcConfig, braking_command, cost_59, earliest_phi_a,
                                   next_pad)
+from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import SECTOR
+from hasel_wheel_sim.wheel import HybridWheel
 
 D = math.radians
 TICK_S = 1.0 / 300.0
@@ -83,7 +85,7 @@ def test_braking_command_is_valid_and_still_ahead_at_any_latch_angle(speed, phi_
         pad, pa = braking_command(latch, speed, phi_a, phi_d)
         assert phi_a <= pa < phi_d
         assert pad * SECTOR + pa >= latch + 2 * TICK_S * speed - 1e-12
-        assert earliest_brake_angle(pad, speed, latch) <= 0.5 * (phi_a + phi_d)
+        assert earliest_phi_a(pad, speed, latch) <= 0.5 * (phi_a + phi_d)
 
 
 def test_next_pad_is_the_first_whose_switch_on_is_still_ahead():
@@ -229,3 +231,36 @@ def test_actuation_limits_bound_every_chosen_phi_a_and_apply_when_changed():
 def test_bad_actuation_limits_are_refused_with_the_range(kw, match):
     with pytest.raises(ValueError, match=match):
         MpcConfig(**kw)
+
+
+def _next_switch_on(phi_a: float, start: float, xi2: float) -> int:
+    """Unwrapped pad of the first switch-on after pad 4 (on, phi_d 22 deg) switches off, with
+    pad 5 commanded at ``phi_a``; the wheel starts at pad 4's contact angle ``start``."""
+    wheel = HybridWheel(mode="tick", xi1=4 * SECTOR + start, xi2=xi2)
+    wheel.command(4, start + D(0.1), D(22))
+    assert [int(e[2]) for e in wheel.advance()] == [L.EV_ARM, L.EV_ON]   # pad 4 is on
+    wheel.command(5, phi_a, D(22))
+    for _ in range(3000):
+        for _, _, kind, eta in wheel.advance():
+            if kind == L.EV_ON:
+                return int(eta)
+    raise AssertionError("no switch-on within 10 s")
+
+
+def test_a_driving_target_is_never_chosen_behind_the_latch():
+    # 4.5 rad/s (the wheel's top speed is 4.7) moves 0.86 deg per tick, and pad 4 switches
+    # off on the first tick past 22 deg, up to 0.86 deg late: pad 5 at 0.25 deg (22.75 deg
+    # of pad 4) can be behind the wheel by then, and would switch on only a turn later (pad
+    # 21).  The MPC, asked for its strongest push (1 deg - 0.75 deg in the refinement), picks
+    # no phi_a below earliest_phi_a (2 ticks past 22 deg), where the pad switches on at
+    # every phase of the ticks.
+    xi2 = 4.5
+    floor = earliest_phi_a(5, xi2, 4 * SECTOR + D(22))
+    assert floor == pytest.approx(D(22) - SECTOR + 2 * TICK_S * xi2)
+    phases = [D(3) + k * xi2 * TICK_S / 24 for k in range(24)]
+    assert {_next_switch_on(D(0.25), p, xi2) for p in phases} == {5, 21}
+    assert {_next_switch_on(floor, p, xi2) for p in phases} == {5}
+    mpc = Mpc()
+    assert D(0.25) in [pytest.approx(a) for a in mpc.config.refinement(D(1))[:, 0]]
+    dec = mpc.decide(4 * SECTOR + D(3), xi2, 4, D(3), D(22), reference=5.0)
+    assert floor <= dec.command.phi_a < floor + D(0.25)
