@@ -9,7 +9,7 @@
     hasel_wheel bag export out/demo/bag --out pq/ --format parquet              # Parquet
     hasel_wheel bag plot out/demo/bag --out plots/ # speed, raster, force, observer (PNG)
     hasel_wheel bag replay out/demo/bag            # re-run observer + MPC, compare (exact)
-    hasel_wheel bag replay out/demo/bag --set mpc.brake_threshold=0.2   # what would change
+    hasel_wheel bag replay out/demo/bag --set mpc.brake_threshold=0.3   # what would change
 
 Under ROS 2 the same tools are ``ros2 run hasel_wheel_mpc hasel_wheel_bag <tool> ...``.
 
@@ -113,7 +113,7 @@ def override_arg(text: str) -> tuple[str, object]:
     key, sep, value = text.partition("=")
     if not sep or not key.strip():
         raise argparse.ArgumentTypeError(f"{text!r}: expected SECTION.FIELD=VALUE, e.g. "
-                                         f"mpc.brake_threshold=0.2 or estimator.gain=null")
+                                         f"mpc.brake_threshold=0.3 or estimator.gain=null")
     return key.strip(), yaml.safe_load(value)
 
 
@@ -198,7 +198,7 @@ def add_tools(tools) -> None:
                    help="wheel namespace to replay, e.g. /wheel0 (repeatable; default: all)")
     r.add_argument("--set", action="append", type=override_arg, metavar="SECTION.FIELD=VALUE",
                    help="change the recorded controller configuration (repeatable), e.g. "
-                        "mpc.brake_threshold=0.2, observer.accel_noise=0.1, estimator.gain=null, "
+                        "mpc.brake_threshold=0.3, observer.accel_noise=0.1, estimator.gain=null, "
                         "model.wheel.tau_f=1.2")
     r.add_argument("--check", action="store_true",
                    help="exit 1 when anything differs from the recording")

@@ -250,7 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the comparison runs (no estimator, paper estimator, finite difference)")
     c.add_argument("--set", action="append", type=bag_cli.override_arg,
                    metavar="SECTION.FIELD=VALUE", help="change the controller of every run (repeatable), e.g. "
-                        "mpc.brake_phi_a=-0.384 (rad) or mpc.brake_threshold=0.2 (rad/s)")
+                        "mpc.brake_phi_a=-0.384 (rad) or mpc.brake_threshold=0.3 (rad/s)")
     c.set_defaults(func=cmd_demo)
     d = sub.add_parser("table2", help="open-loop trials vs. paper Table II, recorded to a bag")
     d.add_argument("--out", default="out/table2", help="output directory (default: out/table2)")

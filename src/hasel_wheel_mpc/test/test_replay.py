@@ -73,13 +73,14 @@ def test_a_lone_mcap_file_keeps_its_configuration(recorded, tmp_path):
 
 def test_a_changed_brake_threshold_differs_from_a_decision_on(recorded):
     path, log = recorded
-    [rep] = replay_bag(path, {"mpc.brake_threshold": 0.05})
+    [rep] = replay_bag(path, {"mpc.brake_threshold": 0.6})
     assert not rep.identical
     decided_at = {round(t, 6) for t, _ in log.decisions}
     t1 = rep.first_difference
     assert round(t1, 6) in decided_at                      # the first change is a decision
     assert all(d.first_t > t1 for d in rep.estimate_diffs.values())   # estimates follow it
-    # the lower threshold first shows as a decision that brakes where the run did not
+    # the higher threshold first shows as a decision that drives where the run braked (the
+    # step down to 1.2 rad/s brakes down to 1.4 rad/s with the default 0.2, to 1.8 with 0.6)
     assert rep.decision_diffs["braking"].first_t == t1
     assert rep.decision_diffs["command.mode"].first_t == t1
     assert "DIFFERENT from t =" in rep.text() and "decision.braking" in rep.text()
@@ -160,7 +161,7 @@ def test_replay_cli(recorded, capsys):
     path, _ = recorded
     assert bag_main(["replay", str(path), "--check"]) == 0
     assert "IDENTICAL" in capsys.readouterr().out
-    assert bag_main(["replay", str(path), "--check", "--set", "mpc.brake_threshold=0.05"]) == 1
+    assert bag_main(["replay", str(path), "--check", "--set", "mpc.brake_threshold=0.6"]) == 1
     assert "DIFFERENT" in capsys.readouterr().out
     assert bag_main(["replay", str(path), "--set", "mpc.nope=1"]) == 2
     assert "no field 'nope'" in capsys.readouterr().err
@@ -176,7 +177,7 @@ def test_the_packaged_ros_parameter_files_are_the_core_defaults():
     changed = controller_from_ros_files(
         obs.replace("accel_noise: 0.05", "accel_noise: 0.08").replace("estimator_gain: 0.07",
                                                                       "estimator_gain: 0.0"),
-        mpc.replace("brake_threshold: 0.3", "brake_threshold: 0.25"))
+        mpc.replace("brake_threshold: 0.2", "brake_threshold: 0.25"))
     assert changed.observer.accel_noise == 0.08 and changed.estimator_gain is None
     assert changed.mpc.brake_threshold == 0.25
     with pytest.raises(ParameterError, match="no 'mpc_node: ros__parameters:' section"):
