@@ -41,6 +41,8 @@ wheel rolling as it was.  Every miss is counted (``Mpc.deadline_misses``).
 """
 from __future__ import annotations
 
+import functools
+import gc
 import math
 import time
 from dataclasses import dataclass
@@ -297,6 +299,25 @@ def next_pad(xi1: float, xi2: float, phi_a: float, lead: float) -> int:
     return (int(math.floor((ahead - phi_a) / SECTOR)) + 1) % 16
 
 
+def gc_paused(fn):
+    """Run ``fn`` with Python's cyclic garbage collector paused (it resumes on return).
+
+    A full collection can take 50-100 ms in a process that holds a long recording (measured
+    in the demo: one decision took 98 ms and missed its deadline).  Deferred to after the
+    decision, it costs the deadline nothing; nothing is freed later than a millisecond.
+    """
+    @functools.wraps(fn)
+    def paused(*args, **kwargs):
+        if not gc.isenabled():
+            return fn(*args, **kwargs)
+        gc.disable()
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            gc.enable()
+    return paused
+
+
 class Mpc:
     """``decide(xi1, xi2, eta_unwrapped, phi_a_now, phi_d_now, reference, d, disturbance)``.
 
@@ -328,6 +349,7 @@ class Mpc:
         self._config = config
         self.cands = config.candidates()
 
+    @gc_paused
     def decide(self, xi1: float, xi2: float, eta_unwrapped: int, phi_a_now: float,
                phi_d_now: float, reference: float, d: float = 0.0,
                disturbance: tuple = (0.0, 0.0, 0.0), pad_on: bool = True) -> Decision:
@@ -404,6 +426,7 @@ class Mpc:
         return Decision(cmd, float(means[best]) + d, float(costs[best]), n, dt, False, slack,
                         missed)
 
+    @gc_paused
     def brake_now(self, xi1: float, xi2: float, d: float, act_counter: float) -> Decision:
         """A braking decision while no actuator is on (a new reference between two pads): it
         replaces the pending target, which switches on ``act_counter`` [rad] from now.

@@ -34,7 +34,7 @@ from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_
 from hasel_wheel_sim.model import SECTOR
 
 from .controller import MPC_PARAMS, REDECIDE_MIN_TIME, decide_at, decision_point
-from .mpc import Mpc, MpcConfig, next_pad
+from .mpc import Mpc, MpcConfig, gc_paused, next_pad
 from .node_model import declare_controller_model
 
 D = math.radians
@@ -208,6 +208,7 @@ class MpcNode(Node):
         if not self.started:
             self.encoder.append((msg.device_time_us * 1e-6, msg.angle))
 
+    @gc_paused          # a garbage collection must not delay a decision or its command
     def _on_estimate(self, e: HybridStateEstimate) -> None:
         t_in = time.perf_counter()
         self.estimates += 1

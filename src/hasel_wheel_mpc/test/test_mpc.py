@@ -1,6 +1,7 @@
 """MPC core: the cost (59) on a hand-checkable case, braking selection, the fallback when no
 candidate completes its cycle, and a short closed loop on the nominal plant."""
 import dataclasses
+import gc
 import math
 
 import numpy as np
@@ -264,3 +265,32 @@ def test_a_driving_target_is_never_chosen_behind_the_latch():
     assert D(0.25) in [pytest.approx(a) for a in mpc.config.refinement(D(1))[:, 0]]
     dec = mpc.decide(4 * SECTOR + D(3), xi2, 4, D(3), D(22), reference=5.0)
     assert floor <= dec.command.phi_a < floor + D(0.25)
+
+
+def test_no_garbage_collection_runs_inside_a_decision():
+    # with a collection due at every allocation, one would start inside decide() unless it
+    # pauses the collector; the fake clock marks where the timed decision begins and ends
+    inside = []
+    collected = []
+
+    def clock():
+        inside.append(not (inside and inside[-1]))
+        return 0.0
+
+    def watch(phase, info):
+        if phase == "start" and inside and inside[-1]:
+            collected.append(info["generation"])
+
+    mpc = Mpc(clock=clock)
+    old = gc.get_threshold()
+    gc.callbacks.append(watch)
+    gc.set_threshold(1, 1, 1)
+    try:
+        mpc.decide(1 * SECTOR + D(3), 1.0, 1, D(3), D(22), reference=1.2)
+        mpc.decide(1 * SECTOR + D(3), 2.0, 1, D(3), D(22), reference=1.2)   # braking
+        mpc.brake_now(1 * SECTOR + D(10), 2.0, 0.0, D(12))
+    finally:
+        gc.set_threshold(*old)
+        gc.callbacks.remove(watch)
+    assert len(inside) == 6 and collected == []
+    assert gc.isenabled()
