@@ -420,6 +420,7 @@ class Mpc:
         if missed:      # too late to matter: keep the wheel rolling as it was
             self.deadline_misses += 1
             pa, pd = self.last_drive
+            pa = max(pa, floor)     # a faster wheel than then: still not behind the latch
         else:
             self.last_drive = (pa, pd)
         cmd = Command((eta_unwrapped + 1) % 16, pa, pd, self.seq)

@@ -189,6 +189,12 @@ def test_a_late_decision_is_replaced_by_the_fallback_and_counted():
         good.deadline_slack + good.compute_time - 1.0, abs=2 * TICK_S)
     assert (dec.command.n_a, dec.command.phi_a, dec.command.phi_d) == (2, D(7.5), D(22))
     assert late.deadline_misses == 1 and on_time.deadline_misses == 0
+    # the fallback's phi_a, chosen at a lower speed, is raised to where pad 2 can still
+    # switch on after pad 1 switches off at 22 deg (earliest_phi_a)
+    late.last_drive = (D(0.25), D(22))
+    fast = late.decide(xi1, 4.5, 1, D(8), D(22), reference=4.5)
+    assert fast.deadline_missed
+    assert fast.command.phi_a == pytest.approx(earliest_phi_a(2, 4.5, 1 * SECTOR + D(22)))
 
 
 def test_refinement_searches_phi_a_and_phi_d_jointly_around_the_coarse_winner():
