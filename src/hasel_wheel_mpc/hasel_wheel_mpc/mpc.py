@@ -36,8 +36,9 @@ would come round only a turn later.  A new reference between two pads is braked 
 Deadline: the decision must be ready ``deadline_margin`` [s] (the command's way to the wheel)
 before the current actuator switches off, as the prediction times it.  A later decision is
 discarded and the fallback is sent instead: the last driving (phi_a, phi_d) again for the next
-pad (the paper's phi_d = 22 deg and the middle of phi_a if there is none), which keeps the
-wheel rolling as it was.  Every miss is counted (``Mpc.deadline_misses``).
+pad (the paper's phi_d = 22 deg and the middle of the allowed phi_a if there is none), which
+keeps the wheel rolling as it was; its phi_a is raised to :func:`earliest_phi_a` if the wheel
+is now too fast for it, within ``phi_a_max``.  Every miss is counted (``Mpc.deadline_misses``).
 """
 from __future__ import annotations
 
@@ -303,8 +304,10 @@ def gc_paused(fn):
     """Run ``fn`` with Python's cyclic garbage collector paused (it resumes on return).
 
     A full collection can take 50-100 ms in a process that holds a long recording (measured
-    in the demo: one decision took 98 ms and missed its deadline).  Deferred to after the
-    decision, it costs the deadline nothing; nothing is freed later than a millisecond.
+    in the demo: one decision took 98 ms and missed its deadline).  The pause only moves it
+    to just after the call: a decision and its command are not delayed, but in a node the
+    samples that follow can be (the observer node is not paused).  Cyclic garbage is freed a
+    decision later (~2 ms).
     """
     @functools.wraps(fn)
     def paused(*args, **kwargs):
@@ -333,8 +336,8 @@ class Mpc:
         self.seq = 0
         self.decisions = 0
         self.deadline_misses = 0
-        mid = self.config.phi_a[len(self.config.phi_a) // 2]
-        self.last_drive = (mid, max(self.config.phi_d))
+        allowed = self.cands[:, 0]          # within the actuation limits
+        self.last_drive = (float(allowed[len(allowed) // 2]), max(self.config.phi_d))
         # load the compiled predictor now, so the first real decision is not the slow one
         self._costs(initial_state(mode="tick"), self.pv, self.cands[:1], 2, 1.0, 0.0)
 
@@ -420,7 +423,8 @@ class Mpc:
         if missed:      # too late to matter: keep the wheel rolling as it was
             self.deadline_misses += 1
             pa, pd = self.last_drive
-            pa = max(pa, floor)     # a faster wheel than then: still not behind the latch
+            # a faster wheel than then: not behind the latch, and still within the limits
+            pa = min(max(pa, floor), cfg.phi_a_max)
         else:
             self.last_drive = (pa, pd)
         cmd = Command((eta_unwrapped + 1) % 16, pa, pd, self.seq)

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from hasel_wheel_driver.samples import ENCODER_COUNT as COUNT
-from hasel_wheel_driver.samples import TelemetrySample
+from hasel_wheel_driver.samples import TelemetrySample, pad_edges
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import rk4
 from hasel_wheel_sim.model import SECTOR, Extensions, param_vector
@@ -169,8 +169,10 @@ class Observer:
             self.P = a @ self.P @ a.T + r * np.outer(k, k)
             self.updates += 1
         self.t = z.t
-        if z.q and not (self._prev and self._prev.q):
-            self.on_since = z.t
+        prev = self._prev
+        if pad_edges(z.q, z.eta_unwrapped, prev.q if prev else 0,
+                     prev.eta_unwrapped if prev else z.eta_unwrapped)[0]:
+            self.on_since = z.t      # also when the one q = 0 sample before it was lost
         self._prev = z
         return self._estimate(z)
 

@@ -195,6 +195,10 @@ def test_a_late_decision_is_replaced_by_the_fallback_and_counted():
     fast = late.decide(xi1, 4.5, 1, D(8), D(22), reference=4.5)
     assert fast.deadline_missed
     assert fast.command.phi_a == pytest.approx(earliest_phi_a(2, 4.5, 1 * SECTOR + D(22)))
+    # with actuation limits, the first fallback (no driving decision yet) lies within them
+    bound = Mpc(config=MpcConfig(phi_a_min=D(9), phi_a_max=D(12)), clock=FakeClock(1.0))
+    first = bound.decide(xi1, 2.0, 1, D(8), D(22), reference=2.0)
+    assert first.deadline_missed and D(9) <= first.command.phi_a <= D(12)
 
 
 def test_refinement_searches_phi_a_and_phi_d_jointly_around_the_coarse_winner():

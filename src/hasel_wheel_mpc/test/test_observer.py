@@ -180,3 +180,19 @@ def test_an_observer_started_on_a_fast_wheel_locks_on(reacquire):
     else:
         assert obs.reacquisitions == 0 and obs.rejected > 0.9 * len(t)
         assert rmse(est[late], v[late]) > 5.0
+
+
+def test_a_switch_on_seen_only_after_lost_samples_restarts_the_on_time():
+    # every sample of one gap between two pads (q = 0) is lost: the next sample already
+    # shows the next pad on, and the actuator's on-time (rise lag) must count from there
+    p = Plant(config=PlantConfig(seed=1), xi2=2.0)
+    p.open_loop(D(9), D(22))
+    samples = [s for s in (p.step() for _ in range(600)) if s is not None]
+    offs = [i for i in range(1, len(samples)) if samples[i].q == 0 and samples[i - 1].q == 1]
+    a = offs[2]
+    b = next(i for i in range(a, len(samples)) if samples[i].q == 1)
+    assert samples[b].eta_unwrapped == samples[a - 1].eta_unwrapped + 1
+    obs = Observer(config=ObserverConfig(default_phi_a=D(9)))
+    for s in samples[:a] + samples[b:b + 1]:
+        obs.step(s)
+    assert obs.on_since == samples[b].t
