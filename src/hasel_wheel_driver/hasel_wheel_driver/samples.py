@@ -65,6 +65,21 @@ def pad_edges(q: int, eta_unwrapped: int, prev_q: int, prev_eta: int) -> tuple[b
     return (q == 1 and prev_q == 0) or jumped, (q == 0 and prev_q == 1) or jumped
 
 
+class PadEdges:
+    """Reads :func:`pad_edges` from sample to sample; before the first sample, q = 0."""
+
+    def __init__(self) -> None:
+        self.q = 0
+        self.eta: int | None = None
+
+    def step(self, q: int, eta_unwrapped: int) -> tuple[bool, bool]:
+        """(switched_on, switched_off) since the previous sample; remembers this one."""
+        prev_eta = eta_unwrapped if self.eta is None else self.eta
+        edges = pad_edges(q, eta_unwrapped, self.q, prev_eta)
+        self.q, self.eta = q, eta_unwrapped
+        return edges
+
+
 def header(t: float, frame_id: str = "") -> dict:
     """std_msgs/Header dict for time t [s] (t >= 0)."""
     sec = math.floor(t)

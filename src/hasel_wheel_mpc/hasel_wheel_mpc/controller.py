@@ -22,7 +22,7 @@ from typing import Any, Callable, Mapping, NamedTuple
 import numpy as np
 import yaml
 
-from hasel_wheel_driver.samples import TelemetrySample, pad_edges
+from hasel_wheel_driver.samples import PadEdges, TelemetrySample
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.model_file import extensions_to_yaml_dict, model_from_mapping
 from hasel_wheel_sim.params import ParameterError, WheelParams
@@ -321,8 +321,7 @@ class SpeedController:
                           if cfg.estimator_gain else None)
         self.observer.command_sent(0, *START_ANGLES)
         self._angles = {0: START_ANGLES}
-        self._prev_q = 0
-        self._prev_eta = 0
+        self._edges = PadEdges()
         self._idle = 0
         self._cycle: list[float] = []
         self._queued: list[float | None] = []    # predictions of cycles starting at switch-offs
@@ -348,8 +347,7 @@ class SpeedController:
         speed = e.xi2 if observer else self._fd
         self._cycle.append(speed)
         self._idle = 0 if s.q else self._idle + 1
-        switched_on, switched_off = pad_edges(s.q, s.eta_unwrapped, self._prev_q, self._prev_eta)
-        self._prev_q, self._prev_eta = s.q, s.eta_unwrapped
+        switched_on, switched_off = self._edges.step(s.q, s.eta_unwrapped)
         last = reference if self._last_ref is None else self._last_ref
         self._last_ref = reference
         # a new reference counts until the next decision: one that arrives too close to a

@@ -112,8 +112,7 @@ class MpcNode(Node):
         # loop state, as in closed_loop.run_closed_loop
         self.angles: OrderedDict[int, tuple[float, float]] = OrderedDict()
         self.latched_seq = -1
-        self.prev_q = 0
-        self.prev_eta = 0
+        self.edges = samples.PadEdges()
         self.idle = 0
         self.last_ref = self.reference
         self.new_ref = False
@@ -215,8 +214,7 @@ class MpcNode(Node):
         self.window_estimates += 1
         speed = e.xi2
         self.idle = 0 if e.q else self.idle + 1
-        switched_on, _ = samples.pad_edges(e.q, e.eta_unwrapped, self.prev_q, self.prev_eta)
-        self.prev_q, self.prev_eta = e.q, e.eta_unwrapped
+        switched_on, _ = self.edges.step(e.q, e.eta_unwrapped)
         ref = self.reference
         # a new reference counts until the next decision (controller.decision_point)
         self.new_ref = self.new_ref or ref != self.last_ref

@@ -26,7 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 from hasel_wheel_driver.samples import ENCODER_COUNT as COUNT
-from hasel_wheel_driver.samples import TelemetrySample, pad_edges
+from hasel_wheel_driver.samples import PadEdges, TelemetrySample
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import rk4
 from hasel_wheel_sim.model import SECTOR, Extensions, param_vector
@@ -114,6 +114,7 @@ class Observer:
         self._recent: deque[bool] = deque(maxlen=self.config.window)
         self._recent_bad = 0          # how many of self._recent are True (kept, not summed)
         self._prev: TelemetrySample | None = None
+        self._edges = PadEdges()
         #: (nu [rad], its predicted variance [rad^2]) of the last update, None before the first
         self.innovation: tuple[float, float] | None = None
 
@@ -131,6 +132,7 @@ class Observer:
     def step(self, z: TelemetrySample) -> Estimate:
         """Fold in one telemetry sample; return the estimate at its time."""
         c = self.config
+        switched_on, _ = self._edges.step(z.q, z.eta_unwrapped)
         r = (COUNT * COUNT) / 12.0 + c.encoder_noise ** 2
         meas = z.angle + 0.5 * COUNT           # middle of the count the encoder floored into
         if self.x is None:
@@ -169,10 +171,8 @@ class Observer:
             self.P = a @ self.P @ a.T + r * np.outer(k, k)
             self.updates += 1
         self.t = z.t
-        prev = self._prev
-        if pad_edges(z.q, z.eta_unwrapped, prev.q if prev else 0,
-                     prev.eta_unwrapped if prev else z.eta_unwrapped)[0]:
-            self.on_since = z.t      # also when the one q = 0 sample before it was lost
+        if switched_on:              # also when the one q = 0 sample before it was lost
+            self.on_since = z.t
         self._prev = z
         return self._estimate(z)
 

@@ -96,8 +96,7 @@ class ObserverNode(Node):
         self.est_mode, self.est_gate = mode, gate
 
         # estimator bookkeeping, as in closed_loop.run_closed_loop
-        self.prev_q = 0
-        self.prev_eta = 0
+        self.edges = samples.PadEdges()
         self.cycle_speeds: list[float] = []
         self.queued: deque = deque(maxlen=8)   # model-only predictions of the coming cycles
         self.window_pred: float | None = None
@@ -189,7 +188,7 @@ class ObserverNode(Node):
         e = self.obs.step(s)
         speed = e.xi2
         self.cycle_speeds.append(speed)
-        _, switched_off = samples.pad_edges(s.q, s.eta_unwrapped, self.prev_q, self.prev_eta)
+        _, switched_off = self.edges.step(s.q, s.eta_unwrapped)
         if switched_off:                       # the cycle some decision predicted has ended
             self.off_since_status = True
             if (self.est and self.window_pred is not None and len(self.cycle_speeds) > 1
@@ -198,7 +197,6 @@ class ObserverNode(Node):
                               self.reference)
             self.window_pred = self.queued.popleft() if self.queued else None
             self.cycle_speeds = [speed]
-        self.prev_q, self.prev_eta = s.q, s.eta_unwrapped
         out = fill(HybridStateEstimate(), samples.state_msg(
             e.t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter, e.eta_unwrapped,
             self.est.d if self.est else 0.0, e.xi2_std, e.quality, e.accel_disturbance))

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from hasel_wheel_driver.samples import Command, TelemetrySample, pad_edges
+from hasel_wheel_driver.samples import Command, PadEdges, TelemetrySample
 from hasel_wheel_sim.model import SECTOR
 
 
@@ -19,15 +19,13 @@ class Sequencer:
         self.phi_a = phi_a
         self.phi_d = phi_d
         self.restart_after = restart_after   # samples without HV before re-sending [1]
-        self._prev_q = 0
-        self._prev_eta = 0
+        self._edges = PadEdges()
         self._idle = 0
         self.seq = 0
 
     def step(self, s: TelemetrySample) -> Command | None:
         """The command to send after sample ``s``, or None."""
-        due, _ = pad_edges(s.q, s.eta_unwrapped, self._prev_q, self._prev_eta)
-        self._prev_q, self._prev_eta = s.q, s.eta_unwrapped
+        due, _ = self._edges.step(s.q, s.eta_unwrapped)
         self._idle = 0 if s.q else self._idle + 1
         if s.hv_monitor > 0 and (due or self._idle >= self.restart_after or self.seq == 0):
             self._idle = 0

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from hasel_wheel_driver.samples import TelemetrySample, pad_edges
+from hasel_wheel_driver.samples import PadEdges, TelemetrySample, pad_edges
 from hasel_wheel_mpc.sequencer import Sequencer
 
 
@@ -55,6 +55,16 @@ def test_restart_counts_from_the_measured_sector_not_a_stale_target():
 ])
 def test_pad_edges_between_two_samples(prev, now, edges):
     assert pad_edges(now[0], now[1], prev[0], prev[1]) == edges
+
+
+def test_pad_edges_tracker_reads_a_sample_stream():
+    # before the first sample the pad counts as off: a first sample with HV on is a switch-on
+    e = PadEdges()
+    stream = [(1, 5), (1, 5), (0, 6), (0, 6), (1, 6), (1, 7), (0, 8)]
+    assert [e.step(q, eta) for q, eta in stream] == [
+        (True, False), (False, False), (False, True), (False, False), (True, False),
+        (True, True), (False, True)]
+    assert PadEdges().step(0, 9) == (False, False)
 
 
 def test_a_switch_on_is_not_missed_when_the_sample_between_two_pads_is_lost():
