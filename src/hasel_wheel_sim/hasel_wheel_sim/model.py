@@ -25,7 +25,7 @@ import numpy as np
 
 from . import layout as L
 from .jit import jit, jit_inline
-from .params import WheelParams
+from .params import FieldSpec, ParameterError, WheelParams, check_value
 
 #: Angle between adjacent actuator pads [rad].
 SECTOR = math.pi / 8.0
@@ -33,6 +33,21 @@ SECTOR = math.pi / 8.0
 N_ACTUATORS = 16
 #: Below this |contact angle| [rad] the force law is taken as 0 (its limit at 0).
 TINY_ANGLE = 1e-12
+
+
+#: Scalar fields of :class:`Extensions`: unit and allowed range (phases as atan2 gives them).
+EXTENSION_FIELDS: dict[str, FieldSpec] = {
+    "com_torque": FieldSpec("N*m", 0.0, 1.0, True, True, doc="off-centre mass: m_offset * g * e"),
+    "com_phase": FieldSpec("rad", -math.pi, math.pi, True, True, doc="angle of the offset"),
+    "platform_torque": FieldSpec("N*m", 0.0, 1.0, True, True, doc="platform disturbance amplitude"),
+    "platform_phase": FieldSpec("rad", -math.pi, math.pi, True, True, doc="pivot angle of its peak"),
+    "viscous": FieldSpec("N*m*s/rad", 0.0, 1.0, True, True, doc="drag torque per speed"),
+    "rise_time": FieldSpec("s", 0.0, 1.0, True, True, doc="actuator force build-up; 0 = instant"),
+    "retention_rate": FieldSpec("1/s", 0.0, 10.0, True, True, doc="force loss per s of HV time"),
+    "retention_recovery": FieldSpec("s", 0.0, 1e6, False, True, doc="recovery time constant"),
+}
+#: Unit and allowed range of each of the 16 actuator gains.
+GAIN_SPEC = FieldSpec("1", 0.0, 10.0, False, True, doc="per-actuator force gain")
 
 
 @dataclass(frozen=True)
@@ -61,6 +76,18 @@ class Extensions:
     retention_recovery: float = 300.0
     gains: tuple[float, ...] = field(default=(1.0,) * N_ACTUATORS)
 
+    def __post_init__(self) -> None:
+        """Range-check every field (:data:`EXTENSION_FIELDS`, :data:`GAIN_SPEC`), so that no
+        value reaches the compiled core that it would turn into inf or nan; raises
+        :class:`~hasel_wheel_sim.params.ParameterError` naming the field and its range."""
+        for name, spec in EXTENSION_FIELDS.items():
+            check_value(name, getattr(self, name), spec, "Extensions")
+        if len(self.gains) != N_ACTUATORS:
+            raise ParameterError(f"Extensions: field 'gains' has {len(self.gains)} entries; "
+                                 f"expected {N_ACTUATORS} numbers in {GAIN_SPEC.describe()}")
+        for i, g in enumerate(self.gains):
+            check_value(f"gains[{i}]", g, GAIN_SPEC, "Extensions")
+
 
 def param_vector(p: WheelParams, ext: Extensions | None = None) -> np.ndarray:
     """Pack parameters into the float64 vector the compiled core reads, shape (L.P_SIZE,)."""
@@ -86,8 +113,6 @@ def param_vector(p: WheelParams, ext: Extensions | None = None) -> np.ndarray:
     pv[L.P_RET_RATE] = ext.retention_rate
     pv[L.P_RET_RECOVERY] = ext.retention_recovery
     pv[L.P_BAND_LO], pv[L.P_BAND_HI] = force_band(p)
-    if len(ext.gains) != N_ACTUATORS:
-        raise ValueError(f"gains must have {N_ACTUATORS} entries, got {len(ext.gains)}")
     pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS] = ext.gains
     return pv
 

@@ -25,33 +25,17 @@ the same reader ``load_wheel_params`` uses.  Every problem raises
 """
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any, Mapping
 
 import yaml
 
-from .model import N_ACTUATORS, Extensions
-from .params import (FieldSpec, ParameterError, WheelParams, load_wheel_params, load_yaml_file,
+from .model import EXTENSION_FIELDS, GAIN_SPEC, N_ACTUATORS, Extensions
+from .params import (ParameterError, WheelParams, load_wheel_params, load_yaml_file,
                      read_valued_mapping, wheel_params_from_mapping)
 
 #: Top-level sections of a model file.
 SECTIONS = ("wheel", "extensions", "provenance")
-
-#: Scalar extension fields: unit and allowed range (phases as atan2 gives them).
-EXTENSION_FIELDS: dict[str, FieldSpec] = {
-    "com_torque": FieldSpec("N*m", 0.0, 1.0, True, True, doc="off-centre mass: m_offset * g * e"),
-    "com_phase": FieldSpec("rad", -math.pi, math.pi, True, True, doc="angle of the offset"),
-    "platform_torque": FieldSpec("N*m", 0.0, 1.0, True, True, doc="platform disturbance amplitude"),
-    "platform_phase": FieldSpec("rad", -math.pi, math.pi, True, True, doc="pivot angle of its peak"),
-    "viscous": FieldSpec("N*m*s/rad", 0.0, 1.0, True, True, doc="drag torque per speed"),
-    "rise_time": FieldSpec("s", 0.0, 1.0, True, True, doc="actuator force build-up; 0 = instant"),
-    "retention_rate": FieldSpec("1/s", 0.0, 10.0, True, True, doc="force loss per s of HV time"),
-    "retention_recovery": FieldSpec("s", 0.0, 1e6, False, True, doc="recovery time constant"),
-}
-#: Unit and allowed range of each of the 16 actuator gains.
-GAIN_SPEC = FieldSpec("1", 0.0, 10.0, False, True, doc="per-actuator force gain")
-
 
 def extensions_to_yaml_dict(ext: Extensions) -> dict[str, dict[str, Any]]:
     """The ``{field: {value, unit}}`` mapping of ``ext`` that :func:`extensions_from_mapping` reads."""
@@ -152,7 +136,8 @@ def save_model(path: str | Path, params: WheelParams, ext: Extensions,
     """Write ``params`` and ``ext`` (and ``provenance``, plain YAML data) to a model file.
 
     The content is checked with the loader before anything is written, so a file this
-    writes always loads (an out-of-range extension raises :class:`ParameterError` instead).
+    writes always loads (an out-of-range extension cannot even be built: :class:`Extensions`
+    checks its fields).
     Floats are written with full precision: :func:`load_model` gives back equal values.
     """
     data: dict[str, Any] = {"wheel": params.to_yaml_dict(), "extensions": extensions_to_yaml_dict(ext)}

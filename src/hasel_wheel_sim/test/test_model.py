@@ -9,7 +9,7 @@ from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import (SECTOR, Extensions, accelerating_input, acceleration,
                                    braking_input, force_law, in_jump_set, jump_map, param_vector,
                                    unwrap_target)
-from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.params import ParameterError, WheelParams
 
 D = math.radians
 
@@ -134,12 +134,26 @@ def test_accelerating_input_is_next_pad():
 
 def test_param_vector_layout():
     p = WheelParams()
-    pv = param_vector(p, Extensions(gains=tuple(float(i) for i in range(16))))
+    gains = tuple(0.5 * (i + 1) for i in range(16))
+    pv = param_vector(p, Extensions(gains=gains))
     assert pv.shape == (L.P_SIZE,)
     assert pv[L.P_INV_INERTIA] == pytest.approx(1 / p.inertia)
-    assert list(pv[L.P_GAINS:L.P_GAINS + 16]) == list(range(16))
-    with pytest.raises(ValueError, match="16 entries"):
-        param_vector(p, Extensions(gains=(1.0,)))
+    assert tuple(pv[L.P_GAINS:L.P_GAINS + 16]) == gains
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"gains": (1.0,)}, r"'gains' has 1 entries; expected 16 numbers in \(0, 10\]"),
+    ({"gains": (1.0,) * 15 + (0.0,)}, r"'gains\[15\]' = 0.0 is out of range; allowed range is \(0, 10\]"),
+    ({"retention_recovery": 0.0}, r"'retention_recovery' = 0.0 is out of range; allowed range is \(0, 1e\+06\] s"),
+    ({"viscous": -1e-4}, r"'viscous' = -0.0001 is out of range; allowed range is \[0, 1\] N\*m\*s/rad"),
+    ({"rise_time": math.nan}, r"'rise_time' = nan is not finite"),
+    ({"com_phase": 4.0}, r"'com_phase' = 4.0 is out of range"),
+    ({"retention_rate": "0.01"}, r"'retention_rate' = '0.01' is not a number"),
+])
+def test_extensions_refuse_values_the_core_cannot_use(kwargs, match):
+    # e.g. a zero recovery time would divide by zero in the core and give inf silently
+    with pytest.raises(ParameterError, match=match):
+        Extensions(**kwargs)
 
 
 def test_force_band_edges_are_negligible(pv):

@@ -122,10 +122,7 @@ def test_bad_model_files_name_the_key_and_the_expectation(tmp_path, mutate, matc
 
 def test_save_refuses_what_it_could_not_load(tmp_path):
     f = tmp_path / "m.yaml"
-    with pytest.raises(ParameterError, match=r"not written.*'rise_time' = -1.0 is out of range"):
-        save_model(f, WheelParams(), Extensions(rise_time=-1.0))
-    with pytest.raises(ParameterError, match=r"'gains': got 3 entries"):
-        save_model(f, WheelParams(), Extensions(gains=(1.0, 1.0, 1.0)))
+    # out-of-range extensions cannot even be built (test_model.py); the provenance is checked
     with pytest.raises(ParameterError, match=r"provenance must be plain YAML data"):
         save_model(f, WheelParams(), Extensions(), {"tool": object()})
     assert not f.exists()
