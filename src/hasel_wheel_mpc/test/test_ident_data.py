@@ -36,6 +36,21 @@ def test_activations_follow_the_pads_and_coast_is_found(trial):
     assert trial.t[c0] == pytest.approx(12.0, abs=0.01) and trial.t[c1] - trial.t[c0] > 3.0
 
 
+def test_activations_survive_lost_samples_between_two_pads(trial):
+    # drop every q = 0 sample between pads k and k + 1 (a USB frame burst lost): the two
+    # activations must stay two, on their own pads, starting at the same times
+    acts = trial.activations
+    k = 20
+    keep = np.ones(trial.t.shape[0], bool)
+    keep[acts[k].stop:acts[k + 1].start] = False
+    assert 0 < np.sum(~keep) < 20
+    cut = D.Trial("cut", *(getattr(trial, c)[keep] for c in
+                           ("t", "angle", "q", "eta", "n_a", "phi_a", "phi_d")))
+    assert [a.eta for a in cut.activations] == [a.eta for a in acts]
+    assert [cut.t[a.start] for a in cut.activations] == [trial.t[a.start] for a in acts]
+    assert cut.t[cut.activations[k].stop - 1] == trial.t[acts[k].stop - 1]
+
+
 def test_csv_round_trip_keeps_every_value(tmp_path, trial):
     p = tmp_path / "trial.csv"
     D.write_csv(trial, p)

@@ -119,11 +119,19 @@ def unwrap_eta(angle: np.ndarray, eta: np.ndarray, phi_a: np.ndarray, phi_d: np.
 
 
 def find_activations(tr: Trial) -> list[Activation]:
-    """Runs of q = 1 with the pad and the angles of their first sample."""
+    """Runs of q = 1 on one pad, with the pad and the angles of their first sample.
+
+    A run also ends where the pad changes with q = 1 on both sides: the q = 0 samples
+    between two pads were lost (a dropped USB frame; at speed with a small phi_a there is
+    only one), and both pads were driven.
+    """
     q = tr.q.astype(bool)
-    edges = np.flatnonzero(np.diff(np.concatenate(([False], q, [False])).astype(np.int8)))
+    eta = tr.eta_unwrapped
+    same = np.concatenate(([False], q[1:] & q[:-1] & (eta[1:] == eta[:-1]), [False]))
+    starts = np.flatnonzero(q & ~same[:-1])
+    stops = np.flatnonzero(q & ~same[1:]) + 1
     out = []
-    for a, b in zip(edges[::2], edges[1::2]):
+    for a, b in zip(starts, stops):
         pa, pd = float(tr.phi_a[a]), float(tr.phi_d[a])
         if not (math.isfinite(pa) and math.isfinite(pd)):
             raise TrialError(f"{tr.source or tr.name}: row {a + 2}: q = 1 but phi_a / phi_d are "
