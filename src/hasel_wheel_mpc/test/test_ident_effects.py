@@ -80,6 +80,8 @@ def test_an_undeclared_com_offset_is_named_measured_and_halves_the_error(com_ide
 SPREAD = {"gain_spread": {"enabled": True, "std": {"value": 0.08, "unit": "1"}}}
 VISCOUS = {"viscous_drag": {"enabled": True,
                             "coefficient": {"value": 0.0005, "unit": "N*m*s/rad"}}}
+RETENTION = {"charge_retention": {"enabled": True, "rate": {"value": 0.1, "unit": "1/s"},
+                                  "recovery": {"value": 300.0, "unit": "s"}}}
 
 
 def _realised_gain_std(seed: int) -> float:
@@ -89,30 +91,44 @@ def _realised_gain_std(seed: int) -> float:
     return float(np.std(g / np.exp(np.mean(np.log(g)))))      # geometric mean 1, as fitted
 
 
-@pytest.mark.parametrize("effect, cid", [(SPREAD, "gain_spread"), (VISCOUS, "viscous_drag")])
-def test_other_undeclared_effects_are_named_and_measured(effect, cid):
+@pytest.mark.parametrize("effect, cid, truth", [
+    (SPREAD, "gain_spread", None),
+    (VISCOUS, "viscous_drag", {"c": 0.0005}),
+    (RETENTION, "charge_retention", {"rate": 0.1, "recovery": 300.0}),
+])
+def test_other_undeclared_effects_are_named_and_measured(effect, cid, truth):
     trials = _trials(effect)
     res = SEL.identify(trials, k_folds=3, max_effects=1, analyse_residuals=False)
     assert res.chosen == (cid,)
     before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
-    v = res.final.fit.values
-    if cid == "viscous_drag":
-        assert v["c"] == pytest.approx(0.0005, rel=0.1)
-        assert v["tau_f"] == pytest.approx(WheelParams().tau_f, rel=0.02)
-        # Halving is not possible here: the true model itself only gets to ~0.48x of the
-        # nominal error (its floor: the free run drifts once a switch crosses a tick).  So:
-        # within 10 % of the true model, and at least 90 % of the reducible error removed.
-        floor = model_error(trials, WheelParams(), (C.BY_ID[cid],),
-                            dict(force_coordinates(WheelParams()), tau_f=WheelParams().tau_f,
-                                 c=0.0005))
-        assert 0.3 * before < floor < 0.6 * before
-        assert after <= 1.1 * floor
-        assert before - after >= 0.9 * (before - floor)
-    else:
+    v, ci = res.final.fit.values, res.final.fit.ci95
+    if truth is None:                     # gain spread: the error can be halved
         assert after <= 0.5 * before
         got = C.BY_ID[cid].describe([v[f"d{i}"] for i in range(1, 16)])
         # 16 gains from ~100 s of data: their spread within 10 %
         assert got["std"] == pytest.approx(_realised_gain_std(3), rel=0.1)
+        return
+    assert v["tau_f"] == pytest.approx(WheelParams().tau_f, rel=0.02)
+    if cid == "viscous_drag":
+        assert v["c"] == pytest.approx(0.0005, rel=0.1)
+    else:
+        # 34 s trials from rested actuators: Q_i stays far below the 300 s recovery time,
+        # which then enters only at second order.  The rate is measured (within 15 %, its
+        # 95 % interval holding the truth); the recovery time is not determined, and its
+        # interval says so (wider than the value itself) without contradicting the truth.
+        assert v["rate"] == pytest.approx(0.1, rel=0.15)
+        assert ci["rate"][0] < 0.1 < ci["rate"][1]
+        lo, hi = ci["recovery"]
+        assert lo < 300.0 < hi and hi - lo > v["recovery"]
+    # Halving is not possible here: the true model itself only gets to ~0.5x of the nominal
+    # error (its floor: the free run drifts once a switch crosses a tick).  So: within 10 %
+    # of the true model, and at least 90 % of the reducible error removed.
+    floor = model_error(trials, WheelParams(), (C.BY_ID[cid],),
+                        dict(force_coordinates(WheelParams()), tau_f=WheelParams().tau_f,
+                             **truth))
+    assert 0.3 * before < floor < 0.6 * before
+    assert after <= 1.1 * floor
+    assert before - after >= 0.9 * (before - floor)
 
 
 def test_on_data_without_an_effect_nothing_is_added():
