@@ -51,6 +51,52 @@ def test_activations_survive_lost_samples_between_two_pads(trial):
     assert cut.t[cut.activations[k].stop - 1] == trial.t[acts[k].stop - 1]
 
 
+def _columns(trial, **changed):
+    cols = {c: getattr(trial, c).copy() for c in ("t", "angle", "q", "eta", "n_a", "phi_a",
+                                                   "phi_d")}
+    cols.update(changed)
+    return cols
+
+
+def test_a_pad_that_switches_on_after_the_schedule_is_cleared_keeps_its_command(trial):
+    # the command link's delay: the host has cleared its schedule (n_a = -1, no angles) when
+    # the pad it last commanded switches on; the activation takes that last command's angles
+    acts = trial.activations
+    a = acts[30]
+    cols = _columns(trial)
+    cols["phi_a"][a.start - 1] = 0.07                 # the last command before the clear
+    cols["n_a"][a.start:] = -1
+    cols["phi_a"][a.start:] = np.nan
+    cols["phi_d"][a.start:] = np.nan
+    cut = D.Trial("latched", **cols)
+    assert [(c.start, c.stop, c.eta) for c in cut.activations] == [
+        (c.start, c.stop, c.eta) for c in acts]
+    assert {(c.phi_a, c.phi_d) for c in cut.activations[30:]} == {(0.07, trial.phi_d[0])}
+    # with no row before that gives the angles, the error names the row
+    cols["phi_a"][:] = np.nan
+    with pytest.raises(D.TrialError, match=rf"row {acts[0].start + 2}: q = 1 but phi_a / "
+                                           rf"phi_d are empty here and in every row before"):
+        D.Trial("none", **cols)
+
+
+def test_the_measured_speed_bridges_isolated_encoder_glitches(trial):
+    # a glitched count (a random reading for one sample) must not reach the compared speed
+    from hasel_wheel_mpc.ident.metrics import measured_speed, speed_from_angle
+    cols = _columns(trial)
+    k = np.arange(500, trial.t.shape[0] - 500, 997)
+    cols["angle"][k] += np.where(k % 2, 1.0, -2.0)          # jumps of 1-2 rad, far from 1 count
+    glitched = D.Trial("glitched", **cols)
+    clean = measured_speed(trial)
+    assert np.max(np.abs(speed_from_angle(glitched.t, glitched.angle) - clean)) > 1.0
+    # a bridged sample (the mean of its neighbours' readings) differs from its true reading
+    # by the floors' difference (< 1 count) and the noise (1 mrad x sqrt(1.5), 4 sigma: 0.8
+    # count): under 2 counts, which the filter passes on with its largest derivative weight
+    impulse = np.zeros(trial.t.shape[0])
+    impulse[3000] = 1.0
+    weight = np.max(np.abs(speed_from_angle(trial.t, impulse)))      # [1/s]
+    assert np.max(np.abs(measured_speed(glitched) - clean)) < 2 * 2 * math.pi / 1024 * weight
+
+
 def test_csv_round_trip_keeps_every_value(tmp_path, trial):
     p = tmp_path / "trial.csv"
     D.write_csv(trial, p)

@@ -124,18 +124,25 @@ def find_activations(tr: Trial) -> list[Activation]:
     A run also ends where the pad changes with q = 1 on both sides: the q = 0 samples
     between two pads were lost (a dropped USB frame; at speed with a small phi_a there is
     only one), and both pads were driven.
+
+    A pad can switch on after the host has cleared its schedule (empty angles, n_a = -1):
+    the wheel still held the last command it was sent (the command link has a delay).  Its
+    angles are then those of the last row that has them.
     """
     q = tr.q.astype(bool)
     eta = tr.eta_unwrapped
     same = np.concatenate(([False], q[1:] & q[:-1] & (eta[1:] == eta[:-1]), [False]))
     starts = np.flatnonzero(q & ~same[:-1])
     stops = np.flatnonzero(q & ~same[1:]) + 1
+    given = np.isfinite(tr.phi_a) & np.isfinite(tr.phi_d)
+    last = np.maximum.accumulate(np.where(given, np.arange(given.shape[0]), -1))
     out = []
     for a, b in zip(starts, stops):
-        pa, pd = float(tr.phi_a[a]), float(tr.phi_d[a])
-        if not (math.isfinite(pa) and math.isfinite(pd)):
+        if last[a] < 0:
             raise TrialError(f"{tr.source or tr.name}: row {a + 2}: q = 1 but phi_a / phi_d are "
-                             f"empty; an active actuator needs the angles it was commanded with")
+                             f"empty here and in every row before; an active actuator needs the "
+                             f"angles it was commanded with")
+        pa, pd = float(tr.phi_a[last[a]]), float(tr.phi_d[last[a]])
         out.append(Activation(int(a), int(b), int(tr.eta_unwrapped[a]), pa, pd))
     return out
 

@@ -7,7 +7,8 @@ the first sample, so every error the model makes accumulates, as in the paper's 
 
 The speed is compared (the paper compares speed).  The measured speed is the trial's
 ``speed`` column when it has one (motion capture), else the Savitzky-Golay derivative of the
-measured angle (``SPEED_WINDOW``, quadratic).  The simulated angle goes through the same
+measured angle (``SPEED_WINDOW``, quadratic) with isolated glitches bridged
+(:func:`measured_speed`).  The simulated angle goes through the same
 filter, so both carry the same smoothing of the 16-per-turn ripple.
 
 Per trial:
@@ -52,7 +53,7 @@ from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate
 from .data import Trial
-from .fit import Problem
+from .fit import Problem, clean_mask
 from .simulate import free_run
 from .threads import run_split
 
@@ -85,6 +86,18 @@ def speed_from_angle(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
     if angle.shape[-1] <= n:
         return np.gradient(angle, t, axis=-1)
     return signal.savgol_filter(angle, n, 2, deriv=1, delta=dt, mode="interp", axis=-1)
+
+
+def measured_speed(trial: Trial) -> np.ndarray:
+    """The trial's measured speed (n,) [rad/s]: its ``speed`` column when it has one, else
+    :func:`speed_from_angle` of its angle with isolated glitches (:func:`~.fit.clean_mask`,
+    the samples the fit leaves out) bridged by linear interpolation.  One glitched count
+    would otherwise put a spike of ~angle jump / filter window into the compared speed."""
+    if trial.speed is not None:
+        return trial.speed
+    ok = clean_mask(trial.t, trial.angle)
+    angle = trial.angle if ok.all() else np.interp(trial.t, trial.t[ok], trial.angle[ok])
+    return speed_from_angle(trial.t, angle)
 
 
 def simulate_trial(problem: Problem, theta: np.ndarray, trial: Trial,
@@ -137,7 +150,7 @@ def trial_metrics(problem: Problem, theta: np.ndarray, trial: Trial,
     capture, exact data) give one run from x0."""
     if ensemble < 1:
         raise ValueError(f"ensemble must be a whole number of runs >= 1, got {ensemble}")
-    v_meas = trial.speed if trial.speed is not None else speed_from_angle(trial.t, trial.angle)
+    v_meas = measured_speed(trial)
     count = problem.quantum
     if not count:
         ensemble, count = 1, 0.0

@@ -14,7 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 import numpy as np  # noqa: E402
 
-from .metrics import simulate_trial, speed_from_angle  # noqa: E402
+from .metrics import measured_speed, simulate_trial, speed_from_angle  # noqa: E402
 from .residual import Diagnostics  # noqa: E402
 from .select import Identification  # noqa: E402
 
@@ -33,7 +33,7 @@ def speed_fits(ident: Identification, out: Path) -> str:
     n = len(ident.trials)
     fig, axes = plt.subplots(n, 1, figsize=(9, 2.2 * n + 0.5), squeeze=False, sharex=False)
     for ax, (i, tr) in zip(axes[:, 0], enumerate(ident.trials)):
-        v = tr.speed if tr.speed is not None else speed_from_angle(tr.t, tr.angle)
+        v = measured_speed(tr)
         ax.plot(tr.t, v, color="0.6", lw=0.8, label="measured")
         for ev, style, label in ((ident.nominal, "C3", "nominal"),
                                  (ident.final, "C0", "identified")):
