@@ -14,10 +14,12 @@ For each effect, switched on alone in the plant and never declared to the tool, 
   harder to see; charge retention at two rates (0.01/s, below what the data can show, and
   0.05/s), with the 95 % interval of each estimate.
 
+Then every effect of the realistic plant at once (up to four chosen; REALISTIC in
+hasel_wheel_sim.effects, with the link effects), as a real wheel would have them.
 Then the closed loop on a COM plant: tracking RMSE with the nominal and with the true model in
 the controller, with the default observer and with its disturbance state off.
 
-Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 5 minutes; also part of
+Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 9 minutes; also part of
 ``./dev bench``).
 """
 from __future__ import annotations
@@ -32,7 +34,7 @@ from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.model_compare import compare_controllers
 from hasel_wheel_mpc.observer import ObserverConfig
-from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import PlantConfig
@@ -109,11 +111,37 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str) -> Non
           f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
 
 
+def run_realistic() -> None:
+    """Every effect of the realistic plant at once (what a real wheel has), up to 4 effects."""
+    trials = S.record_set(S.PAPER_SET, config=PlantConfig(seed=3, switching="tick",
+                                                          effects=effects_from_mapping(REALISTIC)))
+    t0 = time.perf_counter()
+    res = SEL.identify(trials, k_folds=5, max_effects=4)
+    dt = time.perf_counter() - t0
+    v = res.final.fit.values
+    found = []
+    for cid in res.chosen:
+        c = C.BY_ID[cid]
+        d = c.describe([v[p.name] for p in c.params])
+        found.append(f"{cid} " + ", ".join(f"{k} {x:.4g}" for k, x in d.items()
+                                           if isinstance(x, float)))
+    refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
+                       f"({e.reason})" for r in res.rounds for e in r)
+    unexplained = "; ".join(s.text for s in res.diagnostics_after.signatures) or "none"
+    print(f"all effects of the realistic plant at once (REALISTIC, 5 x 60 s, up to 4 effects): "
+          f"chosen {res.chosen or 'none'}: {'; '.join(found)}; tau_f "
+          f"{v['tau_f'] / WheelParams().tau_f - 1:+.1%} of the paper's (viscous drag 5e-4 on "
+          f"top); held-out simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
+          f"{res.final.sim_heldout_rmse:.4f} rad/s; unexplained: {unexplained}; refits: "
+          f"{refits}; {dt:.0f} s")
+
+
 def main() -> None:
     for label, (effect, cid, truth) in CASES.items():
         run(label, effect, cid, truth, S.PAPER_SET, "5 x 60 s")
         if cid in ("rise_lag", "charge_retention"):
             run(label, effect, cid, truth, SHORT, "3 x 34 s")
+    run_realistic()
     com = {"com_offset": {"enabled": True, "torque": {"value": 0.004, "unit": "N*m"},
                           "phase": {"value": 0.5, "unit": "rad"}}}
     plant = PlantConfig(seed=1, switching="tick", effects=effects_from_mapping({**ENCODER,
