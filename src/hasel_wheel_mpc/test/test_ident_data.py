@@ -79,6 +79,21 @@ def test_a_pad_that_switches_on_after_the_schedule_is_cleared_keeps_its_command(
         D.Trial("none", **cols)
 
 
+def test_a_glitch_inside_an_activation_neither_splits_it_nor_moves_its_pad_a_turn(trial):
+    # a reading of -3.1 rad (just under pi, so unwrapping keeps it) one sample after a
+    # switch-on: read off the raw angle it puts that sample's pad a whole turn (16) back
+    acts = trial.activations
+    cols = _columns(trial)
+    k = np.array([a.start + 1 for a in acts[10:40:5]])
+    cols["angle"][k] -= 3.1
+    raw = D.unwrap_eta(cols["angle"], cols["eta"], cols["phi_a"], cols["phi_d"], cols["q"])
+    assert np.any(raw[k] == trial.eta_unwrapped[k] - 16)      # the hazard is real
+    glitched = D.Trial("glitched", **cols)
+    np.testing.assert_array_equal(glitched.eta_unwrapped, trial.eta_unwrapped)
+    assert [(a.start, a.stop, a.eta) for a in glitched.activations] == [
+        (a.start, a.stop, a.eta) for a in acts]
+
+
 def test_the_measured_speed_bridges_isolated_encoder_glitches(trial):
     # a glitched count (a random reading for one sample) must not reach the compared speed
     from hasel_wheel_mpc.ident.metrics import measured_speed, speed_from_angle

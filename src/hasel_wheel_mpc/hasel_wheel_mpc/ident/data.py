@@ -33,6 +33,8 @@ CSV_REQUIRED = ("t", "angle", "q", "eta", "n_a", "phi_a", "phi_d")
 CSV_OPTIONAL = ("speed",)
 #: A coast-down segment must last at least this long [s] to be used for friction.
 MIN_COAST = 1.0
+#: Glitch rejection: a sample further than this from the line through its neighbours [rad].
+GLITCH = 0.05
 
 
 class TrialError(ValueError):
@@ -85,7 +87,9 @@ class Trial:
                              f"not after the previous {float(self.t[k - 1])!r} s (t must "
                              f"increase)")
         self.angle = np.unwrap(self.angle.astype(float))
-        self.eta_unwrapped = unwrap_eta(self.angle, self.eta, self.phi_a, self.phi_d, self.q)
+        # the pad's turn is read from the angle: one glitched count must not move it a turn
+        self.eta_unwrapped = unwrap_eta(bridged_angle(self.t, self.angle), self.eta,
+                                        self.phi_a, self.phi_d, self.q)
         self.activations = find_activations(self)
         self.coasts = find_coasts(self)
 
@@ -103,6 +107,24 @@ class Trial:
         return Trial(name or f"{self.name}[{a}:{b}]", self.t[a:b], self.angle[a:b], self.q[a:b],
                      self.eta[a:b], self.n_a[a:b], self.phi_a[a:b], self.phi_d[a:b],
                      None if self.speed is None else self.speed[a:b], self.source)
+
+
+def clean_mask(t: np.ndarray, y: np.ndarray, tol: float = GLITCH) -> np.ndarray:
+    """False at isolated glitches: samples off the line through both neighbours by > tol [rad]."""
+    ok = np.ones(y.shape[0], dtype=bool)
+    if y.shape[0] < 3:
+        return ok
+    w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
+    line = y[:-2] + w * (y[2:] - y[:-2])
+    ok[1:-1] = np.abs(y[1:-1] - line) <= tol
+    return ok
+
+
+def bridged_angle(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """``angle`` (n,) [rad] with the samples :func:`clean_mask` rejects replaced by linear
+    interpolation between their clean neighbours (the same array when none is rejected)."""
+    ok = clean_mask(t, angle)
+    return angle if ok.all() else np.interp(t, t[ok], angle[ok])
 
 
 def unwrap_eta(angle: np.ndarray, eta: np.ndarray, phi_a: np.ndarray, phi_d: np.ndarray,

@@ -38,12 +38,10 @@ from hasel_wheel_sim.model import N_ACTUATORS, param_vector
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .candidates import Candidate, ParamSpec
-from .data import Trial
+from .data import Trial, clean_mask
 from .simulate import retention_charge, shoot_windows
 from .threads import run_split, with_one_blas_thread
 
-#: Glitch rejection: a sample further than this from the line through its neighbours [rad].
-GLITCH = 0.05
 
 def force_coordinates(p: WheelParams) -> dict[str, float]:
     """The force law's identifiable coordinates (see the module docstring).
@@ -131,17 +129,6 @@ def coastdown_friction(trials: list[Trial], base: WheelParams) -> FrictionEstima
     else:
         q = 1.96
     return FrictionEstimate(mean, (mean - q * se, mean + q * se), int(e.size), [float(x) for x in e])
-
-
-def clean_mask(t: np.ndarray, y: np.ndarray, tol: float = GLITCH) -> np.ndarray:
-    """False at isolated glitches: samples off the line through both neighbours by > tol [rad]."""
-    ok = np.ones(y.shape[0], dtype=bool)
-    if y.shape[0] < 3:
-        return ok
-    w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
-    line = y[:-2] + w * (y[2:] - y[:-2])
-    ok[1:-1] = np.abs(y[1:-1] - line) <= tol
-    return ok
 
 
 # -- the multiple-shooting problem ---------------------------------------------------------------

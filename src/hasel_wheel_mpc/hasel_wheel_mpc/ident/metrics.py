@@ -52,8 +52,8 @@ from scipy import signal
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate
-from .data import Trial
-from .fit import Problem, clean_mask
+from .data import Trial, bridged_angle
+from .fit import Problem
 from .simulate import free_run
 from .threads import run_split
 
@@ -90,14 +90,12 @@ def speed_from_angle(t: np.ndarray, angle: np.ndarray) -> np.ndarray:
 
 def measured_speed(trial: Trial) -> np.ndarray:
     """The trial's measured speed (n,) [rad/s]: its ``speed`` column when it has one, else
-    :func:`speed_from_angle` of its angle with isolated glitches (:func:`~.fit.clean_mask`,
+    :func:`speed_from_angle` of its angle with isolated glitches (:func:`~.data.clean_mask`,
     the samples the fit leaves out) bridged by linear interpolation.  One glitched count
     would otherwise put a spike of ~angle jump / filter window into the compared speed."""
     if trial.speed is not None:
         return trial.speed
-    ok = clean_mask(trial.t, trial.angle)
-    angle = trial.angle if ok.all() else np.interp(trial.t, trial.t[ok], trial.angle[ok])
-    return speed_from_angle(trial.t, angle)
+    return speed_from_angle(trial.t, bridged_angle(trial.t, trial.angle))
 
 
 def simulate_trial(problem: Problem, theta: np.ndarray, trial: Trial,
