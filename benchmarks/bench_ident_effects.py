@@ -19,7 +19,7 @@ hasel_wheel_sim.effects, with the link effects), as a real wheel would have them
 Then the closed loop on a COM plant: tracking RMSE with the nominal and with the true model in
 the controller, with the default observer and with its disturbance state off.
 
-Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 9 minutes; also part of
+Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 10 minutes; also part of
 ``./dev bench``).
 """
 from __future__ import annotations
