@@ -3,7 +3,9 @@
 * decode throughput of FrameDecoder on one core, frames/s (target >= 100,000);
 * latency from a frame's last byte arriving at the host to the decoded sample being handed
   to the publisher callback, p50 and p99, measured over a real pseudo-terminal with the
-  virtual Teensy in its own process at 300 Hz (target p99 < 1 ms).
+  virtual Teensy in its own process at 300 Hz (target p99 < 1 ms);
+* a host whose reader pauses: frames the device lost (always whole: the stream stays framed)
+  and frames the host found damaged (target 0), by length of the pause.
 
 Run: ``./dev bench`` or ``.venv/bin/python benchmarks/bench_link.py``.
 """
@@ -81,6 +83,30 @@ def reconnect_and_watchdog(trials: int = 5) -> tuple[list[float], float]:
     return back, rep.hv_off_t - rep.received[-1].t
 
 
+def host_pause(pause: float, scale: float = 5.0) -> tuple[int, int, int]:
+    """The host's reader sleeps ``pause`` [s of wall time] once, with the device at ``scale`` x
+    real time.  Returns (frames the device could not deliver, frames the host found damaged,
+    telemetry frames the host got)."""
+    cfg = P.Config(telemetry_rate_hz=300, watchdog_ms=1000, max_on_ms=2000, drain_mode=0)
+    link = Path(tempfile.mkdtemp()) / "teensy"
+    dev = DeviceProcess(link, w0=2.0, time_scale=scale)
+    got: list[int] = []
+
+    def on_sample(s) -> None:
+        got.append(s.sequence)
+        if len(got) == 3000:
+            time.sleep(pause)
+    core = DriverCore(LinkConfig(str(link), link_timeout=5.0, device_config=cfg),
+                      on_sample=on_sample).start()
+    time.sleep(3000 / 300 / scale + pause + 2.0)
+    dev.mute(10.0)                 # no new frames; the device's queue drains to the host
+    time.sleep(1.5)
+    core.shutdown()
+    rep = dev.stop()
+    st = core.decoder.stats
+    return rep.write_drops, st.crc_errors + st.framing_errors + st.oversize, len(got)
+
+
 def main() -> None:
     cores = os.sched_getaffinity(0)
     os.sched_setaffinity(0, {min(cores)})
@@ -93,6 +119,10 @@ def main() -> None:
                       ("device wrote frame -> handed on    ", e2e)):
         print(f"  {name}: p50 {np.percentile(lat, 50) * 1e3:.3f} ms, p99 {np.percentile(lat, 99) * 1e3:.3f} ms"
               f" over {lat.size} frames on a pty at 300 Hz   (target p99 < 1 ms)")
+    for pause in (0.5, 0.9, 1.3):
+        lost, damaged, n = host_pause(pause)
+        print(f"  host reader paused {pause:.1f} s at 5x ({pause * 5:.1f} s of device time): "
+              f"{lost} frames lost whole, {damaged} damaged, of {n + lost}   (target 0 damaged)")
     back, wd = reconnect_and_watchdog()
     print(f"  replug -> telemetry with HV on again : {', '.join(f'{b * 1e3:.0f}' for b in back)} ms"
           f"   (target < 1000 ms; backoff cap 250 ms)")

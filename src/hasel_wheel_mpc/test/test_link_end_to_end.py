@@ -66,12 +66,13 @@ def wait(cond, timeout):
 
 
 def mute_and_drain(vt, count, quiet=1.0, timeout=30.0):
-    """Mute the device (its pty stays open) and wait until the host has read all it sent:
+    """Mute the device (its pty stays open, its transmit queue drains) and wait until the host
+    has read all it sent:
     ``count()`` (frames the host has) unchanged for ``quiet`` [s], at most ``timeout`` [s].
     Stopping the device closes its pty, and the kernel then drops whatever the host had not
     read yet: under the load of a full suite the host lagged 4 frames behind at that moment,
     and those intact frames were never decoded."""
-    vt.stall(timeout + 5.0)
+    vt.mute(timeout + 5.0)
     t_end = time.monotonic() + timeout
     last, since = count(), time.monotonic()
     while time.monotonic() < t_end:

@@ -5,6 +5,12 @@ HV interlock, command latching at switch-off, tick-sampled switching, watchdog, 
 on-time, emergency stop.  :class:`VirtualTeensy` runs it at 300 Hz (real or scaled time) on a
 pty, published under a stable symlink like ``/dev/serial/by-id/...``, and injects link faults
 on demand: byte corruption, dropped bytes, stalls and unplug/replug.
+
+Outgoing frames go through a transmit queue of :data:`TX_BUFFER_BYTES`, as a real device's
+bytes go through its USB transmit buffers and the host kernel's tty buffer: a pty alone holds
+only about 20 kB, which at 5x time is a quarter of a wall second of a host that does not read.
+A frame goes into the queue whole or not at all (``write_drops``); the device never writes
+part of a frame, and never waits for room.
 """
 from __future__ import annotations
 
@@ -15,6 +21,7 @@ import select
 import threading
 import time
 import tty
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -152,7 +159,7 @@ class SentFrame:
     type: int
     intact: bool
     message: P.Message
-    t_wall: float = 0.0   # time.monotonic() right after the write (shared by all processes)
+    t_wall: float = 0.0   # time.monotonic() when its last byte went to the pty (all processes)
 
 
 @dataclass
@@ -161,11 +168,18 @@ class HostFrame:
     frame: P.Frame
 
 
+#: Bytes the device -> host path holds beyond the pty before the device drops whole frames:
+#: about a Teensy 4's USB transmit buffers (8 kB) plus the host kernel's tty flip buffer
+#: (64 kB), less the pty's own ~20 kB.  At 300 Hz that is 3-4 s of a host that does not read.
+TX_BUFFER_BYTES = 52 * 1024
+
+
 @dataclass
 class _State:
     running: bool = False
     plugged: bool = False
     stall_until: float = 0.0
+    mute_until: float = 0.0
 
 
 class VirtualTeensy:
@@ -181,7 +195,7 @@ class VirtualTeensy:
         self.decoder = P.FrameDecoder()
         self.sent: list[SentFrame] = []
         self.received: list[HostFrame] = []
-        self.write_drops = 0
+        self.write_drops = 0                  # frames never delivered: no room, no reader, unplugged
         self.faults_seen: list[str] = []     # firmware exceptions (each cut HV)
         self.re_anchors = 0                   # times the tick loop fell behind and re-anchored
         self._state = _State()
@@ -189,6 +203,8 @@ class VirtualTeensy:
         self._master = -1
         self._thread: threading.Thread | None = None
         self._prev_delim_intact = True
+        self._txq = bytearray()               # bytes not yet written to the pty
+        self._txq_frames: deque[list[int]] = deque()   # [index in sent, bytes still queued]
 
     # -- lifecycle ----------------------------------------------------------------------
     def start(self) -> "VirtualTeensy":
@@ -229,9 +245,13 @@ class VirtualTeensy:
             self._state.plugged = True
 
     def unplug(self) -> None:
-        """Remove the device: the link disappears and the host's port fails."""
+        """Remove the device: the link disappears and the host's port fails.
+
+        Frames still in the transmit queue are lost (marked not intact).
+        """
         with self._lock:
             self._state.plugged = False
+            self._lose_queue()
             if self.link.is_symlink():
                 self.link.unlink()
             if self._master >= 0:
@@ -244,6 +264,11 @@ class VirtualTeensy:
     def stall(self, seconds: float) -> None:
         """Stop talking and listening for ``seconds`` of wall time (a hung USB stack)."""
         self._state.stall_until = time.monotonic() + seconds
+
+    def mute(self, seconds: float) -> None:
+        """Send no new frames and read none for ``seconds`` of wall time, but still deliver
+        what the transmit queue holds (the physics go on)."""
+        self._state.mute_until = time.monotonic() + seconds
 
     # -- the device loop ------------------------------------------------------------------
     def _run(self) -> None:
@@ -263,11 +288,14 @@ class VirtualTeensy:
                     next_tick = now + period
                 with self._lock:
                     try:
-                        if self._state.plugged and now >= self._state.stall_until:
+                        live = now >= self._state.stall_until
+                        if self._state.plugged and live and now >= self._state.mute_until:
                             self._read_host()
                             tel = self.fw.tick()
                             self._send(tel)
                         elif self._state.plugged:
+                            if live:
+                                self._flush()
                             self.fw.tick()         # physics go on; the device is mute
                         else:                      # unplugged: unpowered, HV off, wheel coasts
                             self.fw.plant.wheel.cut_hv()
@@ -285,7 +313,9 @@ class VirtualTeensy:
                     time.sleep(timeout)
                 with self._lock:
                     if self._state.plugged:
-                        self._read_host()
+                        self._flush()
+                        if now >= self._state.mute_until:
+                            self._read_host()
             else:
                 time.sleep(timeout)
 
@@ -327,16 +357,48 @@ class VirtualTeensy:
                     b ^= self._rng.randrange(1, 256)
                 out.append(b)
             wire = bytes(out)
-        try:
-            n = os.write(self._master, wire) if self._master >= 0 else 0
-        except (BlockingIOError, OSError):
-            n = 0
-        if n < len(wire):
+        if len(self._txq) + len(wire) > TX_BUFFER_BYTES or self._master < 0:
+            # no room for the whole frame: it is not sent at all, and the stream stays framed
             self.write_drops += 1
-            damaged, delim_ok = True, False
+            self.sent.append(SentFrame(counter, P.TYPE_OF[type(msg)], False, msg, time.monotonic()))
+            return
         self.sent.append(SentFrame(counter, P.TYPE_OF[type(msg)],
-                                   not damaged and self._prev_delim_intact, msg, time.monotonic()))
+                                   not damaged and self._prev_delim_intact, msg, 0.0))
         self._prev_delim_intact = delim_ok
+        self._txq += wire
+        self._txq_frames.append([len(self.sent) - 1, len(wire)])
+        self._flush()
+
+    def _lose_queue(self) -> None:
+        """The queued frames will never arrive (unplugged, or no reader): count them as drops."""
+        for idx, _ in self._txq_frames:
+            self.sent[idx].intact = False
+            self.write_drops += 1
+        self._txq.clear()
+        self._txq_frames.clear()
+        self._prev_delim_intact = True
+
+    def _flush(self) -> None:
+        """Write what the pty takes from the transmit queue; stamp frames whose last byte went."""
+        if not self._txq or self._master < 0:
+            return
+        try:
+            n = os.write(self._master, self._txq)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:            # the pty refuses (no reader): the queued frames are lost
+            self._lose_queue()
+            return
+        del self._txq[:n]
+        now = time.monotonic()
+        while n and self._txq_frames:
+            head = self._txq_frames[0]
+            k = min(n, head[1])
+            head[1] -= k
+            n -= k
+            if head[1] == 0:
+                self.sent[head[0]].t_wall = now
+                self._txq_frames.popleft()
 
 
 @dataclass
@@ -367,6 +429,8 @@ def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> No
             vt.plug()
         elif cmd == "stall":
             vt.stall(arg)
+        elif cmd == "mute":
+            vt.mute(arg)
         elif cmd == "status":
             with vt._lock:
                 conn.send({"t": vt.fw.plant.t, "hv_enabled": vt.fw.hv_enabled,
@@ -386,7 +450,7 @@ def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> No
 class DeviceProcess:
     """A :class:`VirtualTeensy` in its own process, as a real device would be (no shared GIL).
 
-    Control it with :meth:`unplug`, :meth:`plug`, :meth:`stall`, :meth:`status`; :meth:`stop`
+    Control it with :meth:`unplug`, :meth:`plug`, :meth:`stall`, :meth:`mute`, :meth:`status`; :meth:`stop`
     returns a :class:`DeviceReport` with the ground truth of every frame.
     """
 
@@ -421,6 +485,9 @@ class DeviceProcess:
 
     def stall(self, seconds: float) -> None:
         self._call("stall", seconds)
+
+    def mute(self, seconds: float) -> None:
+        self._call("mute", seconds)
 
     def status(self) -> dict:
         return self._call("status")
