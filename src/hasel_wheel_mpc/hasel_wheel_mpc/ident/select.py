@@ -14,8 +14,8 @@ Search (forward selection).  Starting from the nominal model:
    only chooses what to refit: the refit's held-out errors below decide, so a structure
    from outside the library is reported instead of forced onto a wrong explanation.  (The
    window RMSE under-predicts effects that build up over a trial: charge retention at
-   0.1/s was screened at -4.6 % and -48 in log10 p, beside a rise lag at -29, and on one
-   numpy build was refitted, on the next not; refitted, it cuts the simulation error 2x);
+   0.1/s was screened at -4.6 % and -48 in log10 p, beside a rise lag at -29, so it sat on
+   the edge of both rules; refitted, it cuts the held-out simulation error about 2x);
 2. **refit** those to convergence, most promising first, up to ``max_refits``, until one is
    accepted, and **cross-validate** each (k-fold by trial, each fold refitted; the held-out
    trials are scored with the fold's parameters).  Accepted only when all hold:
