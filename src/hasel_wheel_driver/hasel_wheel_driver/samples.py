@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import struct
-from typing import NamedTuple
+from typing import Any, NamedTuple, Sequence
 
 ENCODER_COUNTS = 1024
 #: One encoder count [rad] (10-bit absolute encoder).
@@ -139,13 +139,32 @@ def command_msg(c: Command, t: float) -> dict:
 def state_msg(t: float, xi1: float, xi2: float, q: int, act_counter: float,
               deact_counter: float, eta_unwrapped: int, disturbance: float = 0.0,
               xi2_stddev: float = 0.0, quality: float = 1.0,
-              accel_disturbance: float = 0.0) -> dict:
-    """hasel_wheel_msgs/msg/HybridStateEstimate as a dict."""
+              accel_disturbance: float = 0.0,
+              accel_coefficients: Sequence[float] = (0.0,) * 5) -> dict:
+    """hasel_wheel_msgs/msg/HybridStateEstimate as a dict.  ``accel_coefficients`` are the
+    observer's (c, a, b, e, f) of a_d [rad/s^2] (observer.py); (c, a, b) leaves e, f at 0."""
+    if len(accel_coefficients) not in (3, 5):
+        raise ValueError(f"accel_coefficients: expected (c, a, b) or (c, a, b, e, f) [rad/s^2],"
+                         f" got {len(accel_coefficients)} values")
+    c = tuple(float(x) for x in accel_coefficients) + (0.0,) * (5 - len(accel_coefficients))
     return {"header": header(t, "wheel"), "xi1": xi1, "xi2": xi2, "q": q,
             "activation_counter": act_counter, "deactivation_counter": deact_counter,
             "eta": eta_unwrapped % 16, "eta_unwrapped": eta_unwrapped,
             "disturbance": disturbance, "accel_disturbance": accel_disturbance,
+            **dict(zip(ACCEL_FIELDS, c)),
             "xi2_stddev": xi2_stddev, "quality": quality}
+
+
+#: The HybridStateEstimate fields of the observer's a_d coefficients (c, a, b, e, f).
+ACCEL_FIELDS = ("accel_c", "accel_a", "accel_b", "accel_e", "accel_f")
+
+
+def accel_coefficients_of(m: Any) -> tuple[float, ...] | None:
+    """(c, a, b, e, f) [rad/s^2] from a HybridStateEstimate message, or None when it predates
+    these fields (a bag recorded before them carries only ``accel_disturbance``)."""
+    if not all(hasattr(m, f) for f in ACCEL_FIELDS):
+        return None
+    return tuple(float(getattr(m, f)) for f in ACCEL_FIELDS)
 
 
 def mpc_status_msg(t: float, c: Command, reference: float, predicted: float, cost: float,

@@ -232,7 +232,8 @@ class MpcNode(Node):
         self.new_ref = False
         pa_now, pd_now = self.angles.get(self.latched_seq, DEFAULT_ANGLES)
         dec = decide_at(self.mpc, why, e.xi1, speed, e.eta_unwrapped, pa_now, pd_now, ref,
-                        e.disturbance, (e.accel_disturbance, 0.0, 0.0), e.activation_counter)
+                        e.disturbance, samples.accel_coefficients_of(e)
+                        or (e.accel_disturbance, 0.0, 0.0), e.activation_counter)
         if dec is None:
             return
         cmd = dec.command

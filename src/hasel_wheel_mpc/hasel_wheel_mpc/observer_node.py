@@ -199,7 +199,8 @@ class ObserverNode(Node):
             self.cycle_speeds = [speed]
         out = fill(HybridStateEstimate(), samples.state_msg(
             e.t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter, e.eta_unwrapped,
-            self.est.d if self.est else 0.0, e.xi2_std, e.quality, e.accel_disturbance))
+            self.est.d if self.est else 0.0, e.xi2_std, e.quality, e.accel_disturbance,
+            e.accel_coefficients))
         out.header.stamp = msg.header.stamp          # the estimate is for this sample
         out.header.frame_id = self.frame_id
         self.pub_est.publish(out)

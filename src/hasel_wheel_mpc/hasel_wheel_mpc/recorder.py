@@ -120,7 +120,8 @@ class Recorder:
         self.bag.write(topics.qualified(topics.STATE_ESTIMATE, ns),
                        samples.state_msg(t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter,
                                          e.eta_unwrapped, d, e.xi2_std, e.quality,
-                                         e.accel_disturbance), self._ns_time(t))
+                                         e.accel_disturbance, e.accel_coefficients),
+                       self._ns_time(t))
 
     def decision(self, ns: str, t: float, dec, reference: float) -> None:
         """Record an MPC decision (mpc.Decision) on ``mpc_status`` and its ``command``."""
