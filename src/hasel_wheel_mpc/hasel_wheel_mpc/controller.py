@@ -153,7 +153,7 @@ class ControllerConfig:
 OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_rate",
                    "pivot_rate")
 MPC_PARAMS = ("brake_threshold", "brake_phi_a", "brake_phi_d", "terminal_weight",
-              "time_weighted", "deadline_margin", "max_horizon", "phi_a_min", "phi_a_max")
+              "horizon_pads", "time_weighted", "deadline_margin", "max_horizon", "phi_a_min", "phi_a_max")
 
 
 def _node_parameters(text: str, node: str, where: str) -> dict[str, Any]:

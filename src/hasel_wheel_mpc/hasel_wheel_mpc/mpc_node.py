@@ -74,8 +74,12 @@ class MpcNode(Node):
             float_param("braking deactivation angle phi_d [rad], above brake_phi_a", -SECTOR, 0.0))
         self.declare_parameter(
             "terminal_weight", cfg.terminal_weight,
-            float_param("weight w_T of the terminal speed error in the cost [1]; 0 = (59) alone",
-                        0.0, 100.0))
+            float_param("weight w_T of the speed error at the end of the horizon in the cost "
+                        "[1]; 0 = (59) alone", 0.0, 100.0))
+        self.declare_parameter(
+            "horizon_pads", cfg.horizon_pads,
+            int_param("cycles predicted per candidate: 1 = the paper's next cycle, 2 = that "
+                      "cycle and the next, with the candidate's angles repeated [cycles]", 1, 2))
         self.declare_parameter(
             "time_weighted", cfg.time_weighted,
             text_param("cost = mean over all the cycle's samples (true) or (59)'s mean of the "

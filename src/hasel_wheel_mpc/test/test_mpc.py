@@ -34,6 +34,21 @@ def test_cost_59_by_hand():
     assert cost_59(v[:6], q[:6], ref) == math.inf         # horizon too short: no full cycle
 
 
+def test_cost_over_two_cycles_by_hand():
+    # current actuator on for 2 ticks; candidate: off 2, on 2; the pad after: off 3, on 2
+    q = np.array([1, 1, 0, 0, 1, 1, 0, 0, 0, 1, 1, 0], dtype=float)
+    v = np.array([9, 9, 1.0, 3.0, 2.0, 2.0, 2.5, 2.0, 1.5, 1.0, 3.0, 9])
+    ref = 2.0
+    seg = [(1 + 1) / 2, 0.0, (0.25 + 0 + 0.25) / 3, (1 + 1) / 2]     # the four segment means
+    assert cost_59(v, q, ref, pads=2) == pytest.approx(np.mean(seg))     # = 7/12
+    assert cost_59(v, q, ref, pads=2, time_weighted=True) == pytest.approx(
+        (1 + 1 + 0 + 0 + 0.25 + 0 + 0.25 + 1 + 1) / 9)
+    # the terminal term is the last sample of the horizon (3.0), not of the first cycle (2.0)
+    assert cost_59(v, q, ref, pads=2, terminal_weight=1.0) == pytest.approx(np.mean(seg) + 1.0)
+    assert cost_59(v, q, ref, terminal_weight=1.0) == pytest.approx(0.5 * (1 + 0) + 0.0)
+    assert cost_59(v[:11], q[:11], ref, pads=2) == math.inf   # the 2nd cycle has not ended
+
+
 def test_braking_when_the_speed_is_above_the_reference_by_the_threshold():
     mpc = Mpc(config=MpcConfig(brake_threshold=0.3, brake_phi_a=D(-22)))
     xi1 = 20 * SECTOR + D(3)                               # pad 4 (2nd revolution) just on
@@ -163,6 +178,47 @@ def test_shared_prefix_predictor_equals_the_full_horizon_simulation(w):
     e = out[i, a:c, 1] + 0.1 - 1.5
     assert fast[i] == pytest.approx(np.mean(e ** 2) + 1.0 * e[-1] ** 2, rel=1e-12)
     assert means[i] == pytest.approx(np.mean(out[i, a:c, 1]), rel=1e-12)
+
+@pytest.mark.parametrize("w", [0.7, 1.0, 2.0, 4.46])
+def test_two_cycle_predictor_equals_a_step_by_step_simulation(w):
+    """With horizon_pads = 2 the pad after the candidate is queued, with the candidate's
+    angles, when the candidate switches on; the predictor's costs and first-cycle means equal
+    cost_59 on a HybridWheel stepped tick by tick that is commanded the same way."""
+    from hasel_wheel_mpc.mpc import predict_cycle_costs
+    from hasel_wheel_sim.wheel import TICK
+    cfg = MpcConfig(phi_a=tuple(D(x) for x in np.arange(1, 15.01, 2.0)), phi_d=(D(20), D(22)))
+    mpc = Mpc(config=cfg)
+    s = _state_after_switch_on(mpc, w)
+    n, ticks = len(mpc.cands), int(3.3 * SECTOR / w / TICK)
+    ref, d = 1.5, 0.1
+    fast, means = np.empty(n), np.empty(n)
+    predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, ref, d, 0.5, True, fast, means, 2)
+    slow, first = np.empty(n), np.empty(n)
+    for i, (pa, pd) in enumerate(mpc.cands):
+        wheel = HybridWheel(mode="tick")
+        wheel.pv = mpc.pv
+        wheel.s = s.copy()
+        wheel.s[L.S_PEND_PHI_A], wheel.s[L.S_PEND_PHI_D] = pa, pd
+        rows, queued = [], False
+        for _ in range(ticks):
+            was = wheel.s[L.S_Q]
+            wheel.advance(TICK)
+            if not queued and was == 0 and wheel.s[L.S_Q] == 1:     # the candidate is on
+                wheel.command(int(wheel.s[L.S_ETA] + 1) % 16, pa, pd)
+                queued = True
+            rows.append((wheel.s[L.S_XI2], wheel.s[L.S_Q]))
+        v, q = np.array(rows).T
+        slow[i] = cost_59(v, q, ref, d, 0.5, True, pads=2)
+        offs = np.flatnonzero((q[:-1] == 1) & (q[1:] == 0)) + 1
+        first[i] = v[offs[0]:offs[1]].mean() if len(offs) > 1 else math.nan
+    ok = np.isfinite(slow)
+    assert np.array_equal(ok, np.isfinite(fast)) and ok.sum() >= n - 2
+    assert np.allclose(fast[ok], slow[ok], rtol=1e-12, atol=0.0)
+    assert np.allclose(means[ok], first[ok], rtol=1e-12, atol=0.0)
+    # the second cycle is in the cost: it differs from the one-cycle cost of the same run
+    one = np.empty(n)
+    predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, ref, d, 0.5, True, one, means, 1)
+    assert not np.allclose(one[ok], fast[ok])
 
 
 class FakeClock:

@@ -80,6 +80,6 @@ def test_a_parameter_out_of_range_is_refused_with_the_range(ros):
         good = node.set_parameters([Parameter("reference_speed", Parameter.Type.DOUBLE, 1.5)])[0]
         assert good.successful and node.reference == 1.5
         worse = node.set_parameters([Parameter("max_horizon", Parameter.Type.DOUBLE, 0.01)])[0]
-        assert not worse.successful and node.mpc.config.max_horizon == 4.0
+        assert not worse.successful and node.mpc.config.max_horizon == 6.0
     finally:
         node.destroy_node()
