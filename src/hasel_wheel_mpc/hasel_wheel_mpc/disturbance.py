@@ -27,8 +27,9 @@ from dataclasses import dataclass
 #: The default gain K of the tracking estimator [1 per cycle].  With the observer's pivot
 #: harmonic carrying the platform's pull, a faster d only chases what the MPC cannot hold
 #: from one cycle to the next: on plant seeds 0-15 at 1.0 rad/s the demo's steady error is
-#: within 0.5 % on all 16 seeds with K = 0.07 or 0.05, on 13 with 0.1; 0.05 has a slightly
-#: lower NRMSE there but was not swept over falls or other speeds (bench_speed_loop.py).
+#: within 0.5 % on all 16 seeds with K = 0.05, 0.07 or 0.1 (MPC over two cycles; over one,
+#: 0.1 gave 13); their NRMSE there is alike, and only 0.07 was swept over falls and other
+#: speeds (bench_speed_loop.py).
 TRACKING_GAIN = 0.07
 
 

@@ -81,5 +81,10 @@ def test_a_parameter_out_of_range_is_refused_with_the_range(ros):
         assert good.successful and node.reference == 1.5
         worse = node.set_parameters([Parameter("max_horizon", Parameter.Type.DOUBLE, 0.01)])[0]
         assert not worse.successful and node.mpc.config.max_horizon == 6.0
+        assert node.mpc.config.horizon_pads == 2
+        three = node.set_parameters([Parameter("horizon_pads", Parameter.Type.INTEGER, 3)])[0]
+        assert not three.successful and node.mpc.config.horizon_pads == 2
+        one = node.set_parameters([Parameter("horizon_pads", Parameter.Type.INTEGER, 1)])[0]
+        assert one.successful and node.mpc.config.horizon_pads == 1
     finally:
         node.destroy_node()
