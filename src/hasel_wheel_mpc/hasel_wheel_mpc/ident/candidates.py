@@ -55,6 +55,10 @@ class Candidate:
     #: x (k,) -> the fields of hasel_wheel_sim.model.Extensions it sets (the saved model);
     #: None when the plant and the MPC have no such field
     extension: Callable[[np.ndarray], dict] | None = None
+    #: x (k,) -> None when the fitted values look like the physics the candidate names, else
+    #: a sentence saying why not (the candidate is then refused, and the structure it took
+    #: up is left for the residual analysis to describe)
+    implausible: Callable[[np.ndarray], str | None] | None = None
 
     @property
     def size(self) -> int:
@@ -108,6 +112,43 @@ def _spread_gains(x) -> tuple[float, ...]:
     return tuple(float(v) for v in np.exp(np.concatenate(([-np.sum(x)], x))))
 
 
+#: Below this p-value a gain pattern is too smooth around the wheel for fabrication spread.
+SPREAD_PATTERN_P = 1e-3
+
+
+def spread_pattern(x) -> tuple[int, float, float]:
+    """(k, share, p) of the fitted log-gains: the harmonic k (1..8 per wheel turn) that holds
+    the largest share [1] of their variance around the wheel, and the chance p of so large a
+    share if the 16 gains were independent, as fabrication spread makes them.
+
+    Under that hypothesis each harmonic k < 8 carries two of the 15 degrees of freedom, so
+    its share is Beta(1, 13/2) distributed and exceeds s with probability (1 - s)^(13/2);
+    the eighth carries one, Beta(1/2, 7).  p is the union bound over the eight (an upper
+    bound, tight where it matters).  A torque fixed to the wheel angle (an off-centre mass,
+    anything periodic in the angle) that gains have to imitate puts most of their variance
+    into one low harmonic: an off-centre mass, into the first."""
+    from scipy import stats
+    d = np.concatenate(([-np.sum(x)], np.asarray(x, dtype=float)))
+    power = np.abs(np.fft.rfft(d - d.mean())[1:]) ** 2          # k = 1..8
+    power[:-1] *= 2.0                                           # k and 16 - k
+    total = float(power.sum())
+    if total <= 0.0:
+        return 1, 0.0, 1.0
+    k = int(np.argmax(power))
+    share = float(power[k] / total)
+    p = 7 * stats.beta.sf(share, 1.0, 6.5) + stats.beta.sf(share, 0.5, 7.0)
+    return k + 1, share, float(min(p, 1.0))
+
+
+def _spread_implausible(x) -> str | None:
+    k, share, p = spread_pattern(x)
+    if p >= SPREAD_PATTERN_P:
+        return None
+    return (f"the fitted gains follow a pattern of {k} per wheel turn ({100 * share:.0f} % of "
+            f"their variance; p = {p:.1e} for gains that vary independently, as fabrication "
+            f"spread makes them): a torque periodic in the wheel angle, not a spread")
+
+
 def _com_extension(x):
     d = _com_describe(x)
     return {"com_torque": d["torque_N_m"], "com_phase": d["phase_rad"]}
@@ -146,7 +187,8 @@ LIBRARY: tuple[Candidate, ...] = (
               lambda x: {"retention_rate": float(x[0]), "retention_recovery": float(x[1])}),
     Candidate("gain_spread", "fabrication spread of the 16 actuators' force",
               tuple(ParamSpec(f"d{i}", "1", 0.0, -1.5, 1.5, 0.05) for i in range(1, N_ACTUATORS)),
-              _spread, _spread_describe, "actuator", lambda x: {"gains": _spread_gains(x)}),
+              _spread, _spread_describe, "actuator", lambda x: {"gains": _spread_gains(x)},
+              _spread_implausible),
     Candidate("angle_offset", "pads offset from the encoder's zero",
               (ParamSpec("delta", "rad", 0.0, -SECTOR / 2, SECTOR / 2, 0.01),), _offset,
               lambda x: {"offset_rad": float(x[0])}, "contact_angle"),

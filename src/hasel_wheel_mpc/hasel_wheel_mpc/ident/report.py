@@ -19,7 +19,13 @@ candidates                 [{round, id, score_statistic, score_dof, score_p,
                             on all trials did not beat the current model), wald_p,
                             accepted, reason}]
 unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p_value,
-                            text}] structure left in the final model's residual; [] when none
+                            text, phase_rad, torque_ci95_N_m}] structure left in the final
+                            model's residual; [] when none.  A signature periodic in an
+                            angle is sized by a refit of a torque at its period
+                            (ident/periodic.py): torque_N_m * sin(2 pi x / period +
+                            phase_rad) along its axis x, with a 95 % interval; phase_rad
+                            and torque_ci95_N_m are null where it is sized from the
+                            residual alone
 metrics                    {before: M, after: M}, M = {window_rmse_rad, heldout_window_rmse_rad,
                             simulation: {pooled_fitted_rmse_rad_s, pooled_heldout_rmse_rad_s,
                             per_trial: {name: {fitted: T, heldout: T}}}},
@@ -184,7 +190,9 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
         "unexplained": [] if after is None else [
             {"axis": s.axis, "unit": s.unit, "period": _num(s.period),
              "amplitude_rad_s2": _num(s.amplitude), "torque_N_m": _num(s.torque),
-             "p_value": _num(s.p_value), "text": s.text} for s in after.signatures],
+             "p_value": _num(s.p_value), "text": s.text, "phase_rad": _num(s.phase),
+             "torque_ci95_N_m": None if s.torque_ci95 is None else
+             [_num(v) for v in s.torque_ci95]} for s in after.signatures],
         "metrics": {"before": dict(_metrics(ident.nominal),
                                    prediction=_prediction(ident.prediction_before)),
                     "after": dict(_metrics(ident.final),

@@ -82,6 +82,11 @@ class Signature:
     torque: float             # amplitude x (J/L) [N*m]
     p_value: float
     text: str
+    #: for a periodic signature sized by a refit (:mod:`.periodic`): the torque is
+    #: torque * sin(2 pi x / period + phase) along the signature's axis x [rad]; its 95 %
+    #: interval [N*m].  None when sized from the residual alone
+    phase: float | None = None
+    torque_ci95: tuple[float, float] | None = None
 
 
 @dataclass

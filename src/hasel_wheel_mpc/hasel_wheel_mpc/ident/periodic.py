@@ -1,0 +1,86 @@
+"""The size of an unexplained periodic signature, measured by a refit.
+
+The residual analysis (:mod:`.residual`) finds a periodic structure in what the fitted model
+leaves, and sizes it from that residual.  But the fit had already bent the model (the force
+law's shape, friction) to take up part of the structure before the residual was looked at,
+so the residual shows less than all of it: an outside-library pull of 0.004 N*m came out
+as 0.0027 N*m.  Here the structure is measured the way the library's effects are: a torque
+periodic along the same axis with the same period,
+
+    tau = P sin(k xi1) + Q cos(k xi1)          P, Q [N*m], k = 2 pi / (its period in xi1)
+
+is added to the model and refitted together with everything else; its amplitude
+hypot(P, Q) and the phase atan2(Q, P) replace the residual's figures.  This term is a
+measuring device, not an explanation: it is never chosen as an effect and never goes into
+``model.yaml``.  It rides on the model's pivot-lap term (the frequency in its ``r/L`` slot),
+so it is not used when that term is already part of the model.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.params import WheelParams
+
+from .candidates import Candidate, ParamSpec
+from .data import Trial
+from .fit import FitResult, Problem
+from .residual import Signature
+
+#: Signature axes whose period this module can turn into a frequency along xi1.
+ANGLE_AXES = ("wheel_angle", "pivot_angle", "wheel_angle_unwrapped")
+
+
+def frequency(sig: Signature, base: WheelParams) -> float | None:
+    """k [1/rad]: cycles of ``sig`` per radian of wheel angle xi1, times 2 pi; None when the
+    signature is not periodic along an angle."""
+    if sig.period is None or sig.axis not in ANGLE_AXES or sig.period <= 0.0:
+        return None
+    k = 2 * math.pi / sig.period
+    return k * base.r / base.L if sig.axis == "pivot_angle" else k
+
+
+def periodic_torque(k: float) -> Candidate:
+    """A torque P sin(k xi1) + Q cos(k xi1) [N*m] as a candidate-like term (not in the library)."""
+    def apply(x, pv, extra):
+        pv[L.P_PIVOT_RATIO] = k
+        pv[L.P_PLATFORM_TORQUE] = math.hypot(x[0], x[1])
+        pv[L.P_PLATFORM_PHASE] = math.atan2(x[1], x[0])
+
+    return Candidate(f"periodic_torque_{k:.6g}", "a torque periodic in the wheel angle",
+                     (ParamSpec("P_sig", "N*m", 0.0, -0.5, 0.5, 1e-3),
+                      ParamSpec("Q_sig", "N*m", 0.0, -0.5, 0.5, 1e-3)), apply,
+                     lambda x: {"torque_N_m": math.hypot(x[0], x[1]),
+                                "phase_rad": math.atan2(x[1], x[0])}, "wheel_angle_unwrapped")
+
+
+def measure(sig: Signature, trials: list[Trial], base: WheelParams,
+            effects: tuple[Candidate, ...], fit: FitResult, window: float = 1.0,
+            threads: int = 2) -> Signature:
+    """``sig`` with its amplitude [rad/s^2] and torque [N*m] from a refit of the model
+    (nominal + ``effects``, fitted as ``fit``) plus :func:`periodic_torque` at its period;
+    ``sig`` unchanged when it is not periodic along an angle or the model already has a
+    pivot-lap term."""
+    k = frequency(sig, base)
+    if k is None or any(c.id == "platform_periodic" for c in effects):
+        return sig
+    term = periodic_torque(k)
+    problem = Problem(trials, base, tuple(effects) + (term,), window, threads=threads)
+    res = problem.fit(start=dict(fit.values), x0=fit.z[fit.theta.size:].reshape(-1, 2))
+    p, q = res.values["P_sig"], res.values["Q_sig"]
+    torque = math.hypot(p, q)
+    # 95 % interval of the amplitude from the fit's covariance (delta method)
+    i, j = res.names.index("P_sig"), res.names.index("Q_sig")
+    grad = [p / torque, q / torque] if torque > 0 else [1.0, 0.0]
+    var = (grad[0] ** 2 * res.cov[i, i] + 2 * grad[0] * grad[1] * res.cov[i, j]
+           + grad[1] ** 2 * res.cov[j, j])
+    half = 1.96 * math.sqrt(max(var, 0.0))
+    inertia = base.inertia
+    text = (f"{sig.text.split(', amplitude')[0]}, amplitude {torque / inertia:.3g} rad/s^2 "
+            f"({torque:.2g} N*m, 95 % {max(torque - half, 0.0):.2g} to {torque + half:.2g}; "
+            f"phase {math.atan2(q, p):.3g} rad; fitted with the model as a torque "
+            f"P sin(k xi1) + Q cos(k xi1), k = {k:.4g}/rad)")
+    return dataclasses.replace(sig, amplitude=torque / inertia, torque=torque, text=text,
+                               phase=math.atan2(q, p),
+                               torque_ci95=(max(torque - half, 0.0), torque + half))

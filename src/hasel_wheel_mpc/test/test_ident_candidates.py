@@ -1,0 +1,60 @@
+"""Candidate effects: the plausibility test of a fitted gain spread against its closed form."""
+import math
+
+import numpy as np
+import pytest
+
+from hasel_wheel_mpc.ident import candidates as C
+
+
+def _params(log_gains: np.ndarray) -> np.ndarray:
+    """The candidate's 15 free parameters d_1..d_15 for 16 log-gains (their mean removed)."""
+    d = log_gains - log_gains.mean()
+    return d[1:]
+
+
+def test_a_once_per_turn_gain_pattern_is_named_with_its_harmonic():
+    i = np.arange(16)
+    k, share, p = C.spread_pattern(_params(0.2 * np.cos(2 * math.pi * i / 16 + 0.3)))
+    assert (k, share) == (1, pytest.approx(1.0))
+    assert p < 1e-12
+    k, share, p = C.spread_pattern(_params(0.1 * np.sin(2 * math.pi * 3 * i / 16)))
+    assert (k, share) == (3, pytest.approx(1.0))
+    why = C.BY_ID["gain_spread"].implausible(_params(0.2 * np.cos(2 * math.pi * i / 16)))
+    assert why is not None and "1 per wheel turn" in why and "100 %" in why
+
+
+def test_independent_gains_share_their_variance_as_the_beta_law_says():
+    # under independence the first harmonic's share is Beta(1, 13/2): P(share > s) = (1-s)^6.5
+    rng = np.random.default_rng(7)
+    draws = rng.normal(0.0, 0.08, (20000, 16))
+    d = draws - draws.mean(axis=1, keepdims=True)
+    power = np.abs(np.fft.rfft(d, axis=1)[:, 1:]) ** 2
+    power[:, :-1] *= 2
+    share1 = power[:, 0] / power.sum(axis=1)
+    for s in (0.2, 0.4, 0.6):
+        assert np.mean(share1 > s) == pytest.approx((1 - s) ** 6.5, rel=0.1, abs=2e-4)
+    # and the test refuses at most its nominal rate (a union bound: p is conservative)
+    p = np.array([C.spread_pattern(_params(g))[2] for g in draws[:5000]])
+    assert np.mean(p < C.SPREAD_PATTERN_P) <= C.SPREAD_PATTERN_P * 1.5
+    assert C.BY_ID["gain_spread"].implausible(_params(draws[0])) is None
+
+
+def test_the_signature_term_is_the_torque_it_names():
+    from hasel_wheel_mpc.ident import periodic
+    from hasel_wheel_mpc.ident.residual import Signature
+    from hasel_wheel_sim.model import external_torque, param_vector
+    from hasel_wheel_sim.params import WheelParams
+    base = WheelParams()
+    # a pivot-lap signature: period 2 pi in psi = (r/L) xi1, so k = r/L per rad of xi1
+    sig = Signature("pivot_angle", "rad", 2 * math.pi, 0.1, 0.002, 1e-9, "periodic in ...")
+    assert periodic.frequency(sig, base) == pytest.approx(base.r / base.L)
+    sig = Signature("wheel_angle", "rad", 2 * math.pi / 3, 0.1, 0.002, 1e-9, "periodic in ...")
+    assert periodic.frequency(sig, base) == pytest.approx(3.0)
+    assert periodic.frequency(Signature("speed", "rad/s", None, 0.1, 0.002, 1e-9, ""), base) is None
+    term = periodic.periodic_torque(2.5)
+    pv = param_vector(base)
+    term.apply(np.array([0.003, -0.001]), pv, {})
+    for xi1 in (0.0, 0.7, 4.0, 123.4):
+        assert external_torque(xi1, 1.0, pv) == pytest.approx(
+            0.003 * math.sin(2.5 * xi1) - 0.001 * math.cos(2.5 * xi1), abs=1e-15)
