@@ -1,4 +1,6 @@
-"""Candidate effects: the plausibility test of a fitted gain spread against its closed form."""
+"""Candidate effects and the search's rules: the plausibility test of a fitted gain spread
+against its closed form, the signature-sizing term, and which screened candidates are
+refitted."""
 import math
 
 import numpy as np
@@ -58,3 +60,32 @@ def test_the_signature_term_is_the_torque_it_names():
     for xi1 in (0.0, 0.7, 4.0, 123.4):
         assert external_torque(xi1, 1.0, pv) == pytest.approx(
             0.003 * math.sin(2.5 * xi1) - 0.001 * math.cos(2.5 * xi1), abs=1e-15)
+
+
+def _scores(*rows):
+    """Screenings from (candidate, log10 p, predicted window RMSE [rad]) rows."""
+    from hasel_wheel_mpc.ident.screen import Screening
+    return [Screening(c, 1, 0.0, 10.0 ** lp, lp, rmse, {}) for c, lp, rmse in rows]
+
+
+def test_one_leader_is_refitted_alone_and_rivals_all():
+    from hasel_wheel_mpc.ident.select import refit_order
+    rmse = 1e-3
+    # far ahead of the rest (more than twice as significant): alone, refits stop at it
+    order, rivals = refit_order(_scores(("com_offset", -300, 0.5e-3), ("gain_spread", -40, 0.99e-3),
+                                        ("viscous_drag", -2, 1e-3)), rmse)
+    assert [s.candidate for s in order] == ["com_offset"] and not rivals
+    # the 40 ms rise lag beside charge retention (-42 against -83, -26 next): none leads,
+    # both go on as rivals, the lower predicted error first
+    order, rivals = refit_order(_scores(("rise_lag", -42.2, 0.2957e-3),
+                                        ("charge_retention", -83.0, 0.2927e-3),
+                                        ("angle_offset", -26.3, 0.2968e-3)), 0.299e-3)
+    assert [s.candidate for s in order] == ["charge_retention", "rise_lag"] and rivals
+    # a tied pair far ahead of the rest: both, as rivals
+    order, rivals = refit_order(_scores(("rise_lag", -60, 0.97e-3), ("charge_retention", -70, 0.98e-3),
+                                        ("viscous_drag", -5, 1e-3)), rmse)
+    assert {s.candidate for s in order} == {"rise_lag", "charge_retention"} and rivals
+    # nothing significant (p >= 1e-6): nothing is refitted, whatever it predicts
+    order, _ = refit_order(_scores(("platform_periodic", -5.9, 0.5e-3), ("com_offset", -3, 0.9e-3)),
+                           rmse)
+    assert order == []

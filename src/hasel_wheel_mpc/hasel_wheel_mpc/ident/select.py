@@ -219,6 +219,28 @@ def dominant(scores: list[Screening], group: int = 2, factor: float = 2.0) -> se
     return set()
 
 
+def refit_order(scores: list[Screening], rmse: float, min_gain: float = 0.10,
+                max_refits: int = 2) -> tuple[list[Screening], bool]:
+    """Which screened candidates to refit, most promising (lowest predicted window RMSE)
+    first, and whether they are rivals (all refitted, the held-out errors choose) rather than
+    one leader (the refits stop at the first accepted).  ``rmse`` [rad] is the current
+    model's window RMSE.
+
+    A candidate goes on when it is significant (p < SCREEN_P) and either is predicted to cut
+    the window RMSE by half of ``min_gain`` or is in the lead: the :func:`dominant` group,
+    or, when there is none, the ``max_refits`` most significant.  One candidate far ahead of
+    the rest leads alone; two that tie, or the most significant when none leads, are rivals.
+    """
+    lead = dominant(scores, max_refits)
+    rivals = len(lead) != 1
+    lead = lead or {s.candidate for s in sorted(scores, key=lambda s: s.log10_p)[:max_refits]}
+    promising = sorted((s for s in scores if s.p_value < SCREEN_P and
+                        (s.predicted_rmse <= (1.0 - 0.5 * min_gain) * rmse
+                         or s.candidate in lead)),
+                       key=lambda s: s.predicted_rmse)[:max_refits]
+    return promising, rivals
+
+
 def wald_p(fit: FitResult, effect: Candidate) -> float:
     """p-value of "this effect is absent" from the fit's covariance."""
     names = [p.name for p in effect.params]
@@ -289,16 +311,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             scores = list(pool.map(score, todo))
         ident.screenings.append(scores)
         say("screened: " + ", ".join(f"{s.candidate} chi2 {s.statistic:.0f}" for s in scores))
-        # one candidate far ahead of the rest: refit it alone.  Otherwise (two that tie, or
-        # none that leads) the most significant ones are rivals: each is refitted and the
-        # held-out errors choose
-        lead = dominant(scores, max_refits)
-        rivals = len(lead) != 1
-        lead = lead or {s.candidate for s in sorted(scores, key=lambda s: s.log10_p)[:max_refits]}
-        promising = sorted((s for s in scores if s.p_value < SCREEN_P and
-                            (s.predicted_rmse <= (1.0 - 0.5 * min_gain) * current.fit.rmse
-                             or s.candidate in lead)),
-                           key=lambda s: s.predicted_rmse)[:max_refits]
+        promising, rivals = refit_order(scores, current.fit.rmse, min_gain, max_refits)
         evs = []
         for sc in promising:
             c = BY_ID[sc.candidate]
