@@ -89,3 +89,27 @@ def test_one_leader_is_refitted_alone_and_rivals_all():
     order, _ = refit_order(_scores(("platform_periodic", -5.9, 0.5e-3), ("com_offset", -3, 0.9e-3)),
                            rmse)
     assert order == []
+
+
+def _ev(effect, window_rmse, accepted, plausible=True):
+    from hasel_wheel_mpc.ident.select import Evaluation
+    return Evaluation((effect,), None, window_rmse, {}, accepted=accepted, plausible=plausible,
+                      reason="r")
+
+
+def test_rivals_the_data_cannot_tell_apart_are_not_named():
+    from hasel_wheel_mpc.ident.select import pick
+    # the accepted rival with the lower held-out window error joins
+    a, b = _ev("rise_lag", 0.288e-3, True), _ev("charge_retention", 0.293e-3, True)
+    assert pick([b, a]) is a and a.accepted
+    # a refused rival that fits the held-out windows better: neither is named
+    a, b = _ev("rise_lag", 0.285e-3, True), _ev("charge_retention", 0.283e-3, False)
+    assert pick([b, a]) is None
+    assert not a.accepted and "do not tell the two apart" in a.reason
+    # ... unless it was refused as implausible (a gain pattern that imitates a torque)
+    a, b = _ev("com_offset", 0.30e-3, True), _ev("gain_spread", 0.29e-3, False, plausible=False)
+    assert pick([b, a]) is a
+    # a refused rival that fits worse does not stand in the way
+    a, b = _ev("rise_lag", 0.288e-3, True), _ev("charge_retention", 0.293e-3, False)
+    assert pick([a, b]) is a
+    assert pick([_ev("viscous_drag", 0.3e-3, False)]) is None

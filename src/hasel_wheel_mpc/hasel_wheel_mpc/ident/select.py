@@ -82,6 +82,7 @@ class Evaluation:
     heldout_per_trial: dict[str, float]     # [rad]
     wald_p: float = math.nan                # of the last added effect
     accepted: bool = False
+    plausible: bool = True                  # its values look like the physics it names
     reason: str = ""
     sim_fitted: dict[str, TrialMetrics] = field(default_factory=dict)   # free run, all-trial fit
     sim_heldout: dict[str, TrialMetrics] = field(default_factory=dict)  # free run, fold fits
@@ -219,6 +220,32 @@ def dominant(scores: list[Screening], group: int = 2, factor: float = 2.0) -> se
     return set()
 
 
+def pick(evs: list[Evaluation]) -> Evaluation | None:
+    """The refit that joins the model: the accepted one with the lowest held-out window
+    error, unless a refused rival fits the held-out windows at least as well (and is not
+    refused as implausible).  Then the data do not tell the two apart, and naming either
+    would be a guess: none joins, the winner's verdict and reason say so, and the structure
+    stays in the residual for the analysis to describe.
+
+    Seen with charge retention at 0.05/s on three 34 s trials: retention fitted the held-out
+    windows better (0.283 against 0.285 mrad) but was refused (Wald p 6e-4), while a rise
+    lag passed on the simulation error (-18 % against -11 %)."""
+    good = [e for e in evs if e.accepted]
+    if not good:
+        return None
+    best = min(good, key=lambda e: e.heldout_rmse)
+    tie = [e for e in evs if not e.accepted and e.plausible
+           and e.heldout_rmse <= best.heldout_rmse]
+    if tie:
+        best.accepted = False
+        best.reason += (f"; not named: {'+'.join(tie[0].effects)} (refused) fits the held-out "
+                        f"windows as well ({1e3 * tie[0].heldout_rmse:.3f} against "
+                        f"{1e3 * best.heldout_rmse:.3f} mrad), so the data do not tell the two "
+                        f"apart")
+        return None
+    return best
+
+
 def refit_order(scores: list[Screening], rmse: float, min_gain: float = 0.10,
                 max_refits: int = 2) -> tuple[list[Screening], bool]:
     """Which screened candidates to refit, most promising (lowest predicted window RMSE)
@@ -329,6 +356,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             sim_gain = 1.0 - ev.sim_heldout_rmse / current.sim_heldout_rmse
             odd = c.implausible([ev.fit.values[p.name] for p in c.params]) \
                 if c.implausible else None
+            ev.plausible = odd is None
             ev.accepted = bool(gain > 0.0 and sim_gain >= min_gain and ev.wald_p < 1e-6
                                and odd is None)
             ev.reason = (f"held-out simulation error {ev.sim_heldout_rmse:.4f} rad/s vs "
@@ -342,10 +370,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             if ev.accepted and not rivals:
                 break       # the next round screens the rest again, against this model
         ident.rounds.append(evs)
-        good = [e for e in evs if e.accepted]
-        if not good:
+        best = pick(evs)
+        if best is None:
             break
-        best = min(good, key=lambda e: e.heldout_rmse)
         chosen = tuple(BY_ID[i] for i in best.effects)
         current = best
     ident.final = current
