@@ -68,14 +68,20 @@ def demo_table(exact: list[TrialResult], tick: list[TrialResult]) -> str:
 
 
 def _fresh_bag_dir(out: Path) -> Path | None:
-    """out/bag, removed if it is an earlier bag of ours; None if it is something else."""
+    """out/bag, ready to be written: removed first if it is an earlier bag of ours (it has a
+    metadata.yaml) or empty (a run killed before it recorded anything).  None, with an error
+    printed, if it holds anything else: that is left as it is."""
     bag_dir = out / "bag"
     if bag_dir.exists():
-        if not (bag_dir / "metadata.yaml").exists():
-            print(f"error: {bag_dir} exists but is not a bag written by this tool; "
-                  f"choose another --out", file=sys.stderr)
+        if bag_dir.is_dir() and not any(bag_dir.iterdir()):
+            bag_dir.rmdir()
+        elif not (bag_dir / "metadata.yaml").exists():
+            print(f"error: {bag_dir} exists but is not a bag written by this tool (no "
+                  f"metadata.yaml: another file, or a recording cut off before it closed); "
+                  f"it is left as it is: choose another --out or move it away", file=sys.stderr)
             return None
-        shutil.rmtree(bag_dir)
+        else:
+            shutil.rmtree(bag_dir)
     out.mkdir(parents=True, exist_ok=True)
     return bag_dir
 
@@ -181,13 +187,9 @@ def cmd_link_run(args: argparse.Namespace) -> int:
     from .sequencer import Sequencer
 
     out = Path(args.out)
-    bag_dir = out / "bag"
-    if bag_dir.exists():
-        if not (bag_dir / "metadata.yaml").exists():
-            print(f"error: {bag_dir} exists but is not a bag written by this tool", file=sys.stderr)
-            return 2
-        shutil.rmtree(bag_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    bag_dir = _fresh_bag_dir(out)
+    if bag_dir is None:
+        return 2
     link = Path(tempfile.mkdtemp(prefix="hasel-link-")) / "usb-Teensyduino_HASEL_wheel-if00"
     plant_cfg = dataclasses.replace(load_plant_config(args.plant), switching="tick")
     dev = DeviceProcess(link, plant_cfg, load_wheel_params(args.wheel_params), w0=args.initial_speed,

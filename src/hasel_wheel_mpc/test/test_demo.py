@@ -178,3 +178,17 @@ def test_closed_loop_demo_refuses_an_unknown_override_before_writing(tmp_path, c
 def test_closed_loop_demo_refuses_a_bad_hold_scale(tmp_path, capsys):
     assert cli.main(["demo", "--out", str(tmp_path / "o"), "--hold-scale", "0"]) == 2
     assert "--hold-scale 0.0: expected a positive factor" in capsys.readouterr().err
+
+
+def test_an_earlier_or_empty_bag_dir_is_replaced_but_anything_else_is_kept(tmp_path, capsys):
+    out = tmp_path / "out"
+    (out / "bag").mkdir(parents=True)                 # a run killed before it recorded
+    assert cli._fresh_bag_dir(out) == out / "bag" and not (out / "bag").exists()
+    (out / "bag").mkdir()
+    (out / "bag" / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n")
+    assert cli._fresh_bag_dir(out) == out / "bag" and not (out / "bag").exists()
+    (out / "bag").mkdir()
+    (out / "bag" / "bag_0.mcap").write_bytes(b"\x89MCAP0\r\n")   # cut off before it closed
+    assert cli._fresh_bag_dir(out) is None
+    assert (out / "bag" / "bag_0.mcap").read_bytes() == b"\x89MCAP0\r\n"
+    assert "no metadata.yaml" in capsys.readouterr().err
