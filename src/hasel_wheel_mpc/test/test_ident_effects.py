@@ -4,6 +4,7 @@ is outside the library (issue 5's acceptance), and the report it writes.
 Each data set is three open-loop trials (phi_a 1, 4, 7 deg; 25 s driven, 9 s coasting) from
 the plant simulator, through the 10-bit encoder with 1 mrad noise.  The tool is never told
 which effect is on; it searches the whole library."""
+import dataclasses
 import json
 import math
 
@@ -15,7 +16,7 @@ from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.fit import Problem, force_coordinates
 from hasel_wheel_mpc.ident.metrics import model_error, speed_from_angle, trial_metrics
-from hasel_wheel_mpc.ident.report import write_report
+from hasel_wheel_mpc.ident.report import fit_status_text, write_report
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.model_file import load_model
 from hasel_wheel_sim.params import WheelParams
@@ -180,8 +181,15 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     assert on_disk["chosen_effects"] == ["com_offset"] == data["chosen_effects"]
     for key in ("schema", "trials", "friction", "nominal", "effects", "candidates",
                 "unexplained", "metrics", "diagnostics", "paper_table3", "model_file",
-                "figures"):
+                "figures", "fits"):
         assert key in on_disk
+    # the model with the right effect converges well inside the evaluation limit
+    final = on_disk["fits"]["final"]
+    assert final["converged"] is True and final["evaluations"] < 100
+    assert final == {"converged": com_identification.final.fit.converged,
+                     "evaluations": com_identification.final.fit.nfev,
+                     "message": com_identification.final.fit.message}
+    assert all(c["converged"] is None for c in on_disk["candidates"] if not c["refitted"])
     for name in on_disk["figures"]:
         assert (tmp_path / name).stat().st_size > 5000
     per_trial = on_disk["metrics"]["after"]["simulation"]["per_trial"]
@@ -199,6 +207,16 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     assert params.tau_f == pytest.approx(com_identification.final.fit.values["tau_f"])
     md = (tmp_path / "report.md").read_text()
     assert "com_offset" in md and "Table III" in md
+    assert f"identified fit converged after {final['evaluations']} evaluations" in md
+
+
+def test_a_fit_stopped_at_its_limit_is_reported_as_not_converged(com_identification):
+    ev = dataclasses.replace(com_identification.nominal, fit=dataclasses.replace(
+        com_identification.nominal.fit, converged=False, nfev=100,
+        message="The maximum number of function evaluations is exceeded."))
+    text = fit_status_text(ev, "nominal")
+    assert "did not converge" in text and "limit of 100 evaluations" in text
+    assert "converged after" in fit_status_text(com_identification.final, "identified")
 
 
 def test_the_one_step_prediction_residual_is_white_only_with_the_missing_effect(

@@ -9,12 +9,17 @@ trials                     [{name, source, duration_s, samples, activations, coa
 friction                   {tau_f_N_m, ci95_N_m: [lo, hi], segments} or null (no coast-down)
 nominal                    {parameters: {name: {value, unit, ci95: [lo, hi]}},
                             wheel: {sigma1..sigma6, tau_f, brake_gain}}
+fits                       {nominal: F, final: F}, F = {converged, evaluations, message}:
+                            whether the least-squares fit on all trials met its tolerances
+                            or stopped at its evaluation limit (then its values are where
+                            it stopped, not a minimum)
 chosen_effects             [stable identifier, ...] in the order chosen; [] when none
 effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             physical: {...}, physical_ci95: {name: [lo, hi]}, wald_p}]
                             for the chosen ones
 candidates                 [{round, id, score_statistic, score_dof, score_p,
-                            predicted_window_rmse_rad, refitted, window_rmse_rad,
+                            predicted_window_rmse_rad, refitted, converged (null: not
+                            refitted), window_rmse_rad,
                             heldout_window_rmse_rad (null: not cross-validated, the fit
                             on all trials did not beat the current model), wald_p,
                             accepted, reason}]
@@ -141,6 +146,22 @@ def _prediction(pr: dict) -> dict:
                    "whiteness_outside": _num(p.whiteness_outside)} for name, p in pr.items()}
 
 
+def _fit_status(ev: Evaluation) -> dict:
+    return {"converged": bool(ev.fit.converged), "evaluations": int(ev.fit.nfev),
+            "message": ev.fit.message}
+
+
+def fit_status_text(ev: Evaluation, label: str) -> str:
+    """One sentence on whether the fit of ``ev`` on all trials converged."""
+    if ev.fit.converged:
+        return f"The {label} fit converged after {ev.fit.nfev} evaluations."
+    return (f"**The {label} fit did not converge**: it stopped at its limit of {ev.fit.nfev} "
+            f"evaluations ({ev.fit.message}), so its values are where it stopped, not a "
+            f"minimum.  A model that lacks an effect present in the data typically does this: "
+            f"its force law drifts along a direction the data hardly determine while the "
+            f"error falls slowly.")
+
+
 def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> dict:
     """The report as a JSON-ready dict (keys in the module docstring)."""
     nominal_names = ident.nominal.fit.names
@@ -166,6 +187,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                 "round": k + 1, "id": s.candidate, "score_statistic": _num(s.statistic),
                 "score_dof": s.dof, "score_p": _num(s.p_value),
                 "predicted_window_rmse_rad": _num(s.predicted_rmse), "refitted": e is not None,
+                "converged": bool(e.fit.converged) if e else None,
                 "window_rmse_rad": _num(e.fit.rmse) if e else None,
                 "heldout_window_rmse_rad": _num(e.heldout_rmse) if e else None,
                 "wald_p": _num(e.wald_p) if e else None,
@@ -184,6 +206,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                     "wheel": {k: _num(getattr(wheel, k)) for k in
                               ("sigma1", "sigma2", "sigma3", "sigma4", "sigma5", "sigma6",
                                "tau_f", "brake_gain")}},
+        "fits": {"nominal": _fit_status(ident.nominal), "final": _fit_status(ident.final)},
         "chosen_effects": list(ident.chosen),
         "effects": chosen,
         "candidates": candidates,
@@ -287,6 +310,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
               f"{fr.segments} coast-downs.", ""]
     else:
         L += ["No coast-down found: τf is fitted with the force law.", ""]
+    L += [fit_status_text(nb, "nominal") + ("" if na is nb else
+                                            "  " + fit_status_text(na, "identified")), ""]
     L += ["| parameter | nominal | 95 % CI | identified model |", "|---|---|---|---|"]
     for k, v in data["nominal"]["parameters"].items():
         after = na.fit.values.get(k, math.nan)

@@ -315,7 +315,8 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         "no coast-down: tau_f is fitted with the force law")
     current = evaluate(trials, base, (), window, start, folds, threads)
     say(f"nominal model: window RMSE {1e3 * current.fit.rmse:.3f} mrad, held-out "
-        f"{1e3 * current.heldout_rmse:.3f} mrad ({current.fit.nfev} evaluations)")
+        f"{1e3 * current.heldout_rmse:.3f} mrad ({current.fit.nfev} evaluations"
+        + ("" if current.fit.converged else ", stopped at the limit: not converged") + ")")
     current.accepted, current.reason = True, "nominal model"
     nominal = current
     chosen: tuple[Candidate, ...] = ()
