@@ -180,6 +180,9 @@ def one_rad_s_budget() -> list[tuple[str, list[float], float, float, float]]:
 #: Controllers the seed sweep runs on the whole Fig. 11 profile (1.0 rad/s window and fall):
 #: (label, overrides of the default).  The last three are earlier defaults.
 SWEEP_FULL = (("default", {}),
+              ("refinement +-0.75 x {20,21,22} (was)",
+               {"mpc.refine_phi_a": [math.radians(0.25 * k) for k in range(-3, 4)],
+                "mpc.refine_phi_d": [math.radians(d) for d in (20.0, 21.0, 22.0)]}),
               ("one-cycle horizon, w_T 1 (was)", {"mpc.horizon_pads": 1,
                                                   "mpc.terminal_weight": 1.0}),
               ("observer random walks 0.05 (was)", {"observer.disturbance_rate": 0.05,

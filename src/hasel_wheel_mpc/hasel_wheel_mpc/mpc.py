@@ -18,7 +18,8 @@ phi_a + ``refine_phi_a`` offsets x ``refine_phi_d`` (by default +-0.25 deg x {21
 and the winner at 21 deg: 5 more, 20 in all).  The finer pass was 7 x 3 (+-0.75 deg in
 0.25 deg steps x {20, 21, 22} deg, 36 in all) until decisions over two cycles took 2.9 ms
 at p99 on a slower machine; over plant seeds 0-15 the smaller pass did as well at 1.0 rad/s
-and in the 2.6 -> 2.0 rad/s fall (``benchmarks/bench_speed_loop.py`` prints both).
+and in the 2.6 -> 2.0 rad/s fall (``benchmarks/bench_speed_loop.py``'s seed sweep, row
+"refinement ... (was)" for the larger pass).
 
 Cost (59), as we read it: the next cycle has two flow segments, q = 0 (waiting for the
 candidate's switch-on) and q = 1 (the candidate on, until it switches off).  Each segment's

@@ -160,7 +160,7 @@ def test_a_periodic_torque_that_gains_could_imitate_is_not_forced_onto_them():
 def test_a_refit_refused_on_all_trials_is_not_cross_validated():
     # a fit whose values are refused (an implausible gain pattern) cannot be accepted, so
     # its folds are not fitted: on 5 x 60 s with an off-centre mass outside the library that
-    # saves 36 s of 153 (benchmarks/bench_ident.py)
+    # saved 33 s of 153 (benchmarks/bench_ident.py)
     trials = _trials({})
     folds = SEL.folds_of(len(trials), 3)
     asked = []

@@ -40,7 +40,7 @@ Search (forward selection).  Starting from the nominal model:
      makes independent gains, so such a pattern is refused
      (:func:`~.candidates.spread_pattern`) and the structure is reported as unexplained.
      The test needs only the fit on all trials, so an implausible refit is refused before
-     its folds are fitted (the off-centre mass outside the library: 117 s instead of 153 s).
+     its folds are fitted (the off-centre mass outside the library: 119.9 s instead of 153.2 s, bench_ident.py).
 
 The best accepted candidate joins the model and the search repeats, up to ``max_effects``.
 Whatever structure remains in the residual afterwards is reported as unexplained, with its
