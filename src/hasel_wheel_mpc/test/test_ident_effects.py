@@ -15,7 +15,8 @@ from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.fit import Problem, force_coordinates
-from hasel_wheel_mpc.ident.metrics import model_error, speed_from_angle, trial_metrics
+from hasel_wheel_mpc.ident.metrics import (model_error, pooled_rmse, speed_from_angle,
+                                           trial_metrics)
 from hasel_wheel_mpc.ident.report import fit_status_text, write_report
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.model_file import load_model
@@ -174,6 +175,15 @@ def test_a_refit_refused_on_all_trials_is_not_cross_validated():
     assert math.isnan(ev.heldout_rmse) and not ev.fold_values and not ev.sim_heldout
     ok = SEL.evaluate(trials, WheelParams(), (), 1.0, {}, folds, refuse=lambda fit: None)
     assert ok.heldout_rmse > 0.0 and set(ok.fold_values) == {t.name for t in trials}
+    # nor is a fit whose simulation error on its own trials does not fall below the
+    # current model's (the same fit here: the runs are deterministic); a bar just above
+    # its error lets the folds run
+    fitted = pooled_rmse(ok.sim_fitted)
+    same = SEL.evaluate(trials, WheelParams(), (), 1.0, {}, folds, sim_below=fitted)
+    assert pooled_rmse(same.sim_fitted) == fitted
+    assert math.isnan(same.heldout_rmse) and not same.fold_values
+    above = SEL.evaluate(trials, WheelParams(), (), 1.0, {}, folds, sim_below=1.001 * fitted)
+    assert above.heldout_rmse == ok.heldout_rmse and above.fold_values == ok.fold_values
 
 
 def test_an_effect_outside_the_library_is_reported_not_forced():
@@ -182,6 +192,9 @@ def test_an_effect_outside_the_library_is_reported_not_forced():
     lib = C.library(exclude=["platform_periodic"])
     res = SEL.identify(_trials(PLATFORM), library=lib, k_folds=3)
     assert res.chosen == ()
+    # a refit that was not cross-validated says so, and why
+    for ev in (e for r in res.rounds for e in r):
+        assert math.isnan(ev.heldout_rmse) == ("refused, not cross-validated:" in ev.reason)
     sig = [s for s in res.diagnostics_after.signatures if s.axis == "pivot_angle"]
     assert sig, [s.text for s in res.diagnostics_after.signatures]
     assert sig[0].period == pytest.approx(2 * math.pi, rel=0.02)      # once per pivot lap
