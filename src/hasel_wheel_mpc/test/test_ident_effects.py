@@ -81,7 +81,8 @@ def test_an_undeclared_com_offset_is_named_measured_and_halves_the_error(com_ide
 
 SPREAD = {"gain_spread": {"enabled": True, "std": {"value": 0.08, "unit": "1"}}}
 VISCOUS = {"viscous_drag": {"enabled": True,
-                            "coefficient": {"value": 0.0005, "unit": "N*m*s/rad"}}}
+                            "coefficient": {"value": 0.001, "unit": "N*m*s/rad"}}}
+RISE = {"rise_lag": {"enabled": True, "time_constant": {"value": 0.05, "unit": "s"}}}
 RETENTION = {"charge_retention": {"enabled": True, "rate": {"value": 0.1, "unit": "1/s"},
                                   "recovery": {"value": 300.0, "unit": "s"}}}
 
@@ -93,12 +94,15 @@ def _realised_gain_std(seed: int) -> float:
     return float(np.std(g / np.exp(np.mean(np.log(g)))))      # geometric mean 1, as fitted
 
 
-@pytest.mark.parametrize("effect, cid, truth", [
-    (SPREAD, "gain_spread", None),
-    (VISCOUS, "viscous_drag", {"c": 0.0005}),
-    (RETENTION, "charge_retention", {"rate": 0.1, "recovery": 300.0}),
+@pytest.mark.parametrize("effect, cid, truth, halvable", [
+    (SPREAD, "gain_spread", None, True),
+    (VISCOUS, "viscous_drag", {"c": 0.001}, True),
+    # a 50 ms rise lag that the nominal force law half absorbs (screened from a single
+    # start it scored chi^2 8 and was never refitted, and charge retention was named)
+    (RISE, "rise_lag", {"tau": 0.05}, True),
+    (RETENTION, "charge_retention", {"rate": 0.1, "recovery": 300.0}, False),
 ])
-def test_other_undeclared_effects_are_named_and_measured(effect, cid, truth):
+def test_other_undeclared_effects_are_named_and_measured(effect, cid, truth, halvable):
     trials = _trials(effect)
     res = SEL.identify(trials, k_folds=3, max_effects=1, analyse_residuals=False)
     assert res.chosen == (cid,)
@@ -111,9 +115,10 @@ def test_other_undeclared_effects_are_named_and_measured(effect, cid, truth):
         assert got["std"] == pytest.approx(_realised_gain_std(3), rel=0.1)
         return
     assert v["tau_f"] == pytest.approx(WheelParams().tau_f, rel=0.02)
-    if cid == "viscous_drag":
-        assert v["c"] == pytest.approx(0.0005, rel=0.1)
-        assert ci["c"][0] < 0.0005 < ci["c"][1]               # its 95 % interval holds the truth
+    if cid in ("viscous_drag", "rise_lag"):
+        name = next(iter(truth))
+        assert v[name] == pytest.approx(truth[name], rel=0.1)
+        assert ci[name][0] < truth[name] < ci[name][1]     # its 95 % interval holds the truth
     else:
         # 34 s trials from rested actuators: Q_i stays far below the 300 s recovery time,
         # which then enters only at second order.  The rate is measured (within 15 %, its
@@ -123,13 +128,20 @@ def test_other_undeclared_effects_are_named_and_measured(effect, cid, truth):
         assert ci["rate"][0] < 0.1 < ci["rate"][1]
         lo, hi = ci["recovery"]
         assert lo < 300.0 < hi and hi - lo > v["recovery"]
-    # Halving is not possible here: the true model itself only gets to ~0.5x of the nominal
-    # error (its floor: the free run drifts once a switch crosses a tick).  So: within 10 %
-    # of the true model, and at least 90 % of the reducible error removed.
+    # The free run has a floor: even the true model drifts from the recording once a switch
+    # crosses a tick.  Where that floor is below half the nominal model's error, the
+    # identified model must halve the error (the bar).  Where it is not (retention
+    # at 0.1/s: the true model gets to ~0.57x), halving is not something a model can do; the
+    # identified one must come within 10 % of the true model and remove at least 90 % of
+    # the error above it.
     floor = model_error(trials, WheelParams(), (C.BY_ID[cid],),
                         dict(force_coordinates(WheelParams()), tau_f=WheelParams().tau_f,
                              **truth))
-    assert 0.3 * before < floor < 0.6 * before
+    if halvable:
+        assert floor < 0.5 * before
+        assert after <= 0.5 * before
+    else:
+        assert 0.5 * before < floor < 0.7 * before
     assert after <= 1.1 * floor
     assert before - after >= 0.9 * (before - floor)
 
