@@ -113,3 +113,26 @@ def test_rivals_the_data_cannot_tell_apart_are_not_named():
     a, b = _ev("rise_lag", 0.288e-3, True), _ev("charge_retention", 0.293e-3, False)
     assert pick([a, b]) is a
     assert pick([_ev("viscous_drag", 0.3e-3, False)]) is None
+
+
+def _sim(effects, rmse):
+    from hasel_wheel_mpc.ident.metrics import TrialMetrics
+    from hasel_wheel_mpc.ident.select import Evaluation
+    # two trials of 100 samples each at the same error: pooled = rmse
+    return Evaluation(effects, None, 0.3e-3, {}, sim_fitted={
+        n: TrialMetrics(n, rmse, 0.9, 0.05, 0.0, 100) for n in ("a", "b")})
+
+
+def test_a_gain_that_a_restart_of_the_current_model_also_reaches_is_not_the_effects():
+    from hasel_wheel_mpc.ident.select import optimum_not_effect
+    current = _sim(("gain_spread",), 0.0387)
+    best = _sim(("gain_spread", "rise_lag"), 0.0288)
+    # the current model refitted from the augmented fit's end: as good -> refused, saying why
+    why = optimum_not_effect(current, best, _sim(("gain_spread",), 0.0280))
+    assert why is not None and "better optimum" in why and "rise_lag" in why
+    # ... and so while the effect's own gain over the restart is under min_gain (10 %)
+    assert optimum_not_effect(current, best, _sim(("gain_spread",), 0.0319)) is not None
+    # the effect cuts the error by more than 10 % against the restart: its gain stands
+    assert optimum_not_effect(current, best, _sim(("gain_spread",), 0.0321)) is None
+    # the restart found nothing better than the current model: no question arises
+    assert optimum_not_effect(current, best, _sim(("gain_spread",), 0.0387)) is None
