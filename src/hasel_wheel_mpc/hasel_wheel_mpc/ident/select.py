@@ -53,7 +53,7 @@ Search (forward selection).  Starting from the nominal model:
 The best accepted candidate joins the model only if its gain is its own: the current model
 is refitted from where the augmented fit ended (30 evaluations, no folds), and when that
 refit simulates the trials better than the current fit did, the effect must still cut the
-error by ``min_gain`` against it (:func:`optimum_not_effect`).  If not, the effect is refused,
+error by half of ``min_gain`` against it (:func:`optimum_not_effect`).  If not, the effect is refused,
 the current model is replaced by that better optimum of itself (cross-validated again), and
 the search screens once more against it.  The best accepted candidate joins the model and
 the search repeats, up to ``max_effects``.
@@ -294,18 +294,22 @@ def optimum_not_effect(current: Evaluation, best: Evaluation, check: Evaluation,
     ``check`` is the current model refitted from where ``best``'s fit ended (the effect's
     parameters dropped).  When that refit simulates the trials it was fitted to better than
     ``current`` did (pooled free-run error, :mod:`.metrics`), ``current`` sat in a poorer
-    optimum; the effect must then still cut the error by ``min_gain`` against the refit.
+    optimum; the effect must then still cut the error by half of ``min_gain`` against the
+    refit.  (Half: the effect has already cut the held-out error by ``min_gain`` against
+    ``current``; this is only to catch a gain that is not the effect's at all.  With the
+    full ``min_gain`` a real 20 ms rise lag on 5 x 60 s, whose true model gets 1.14x below
+    the nominal one, was refused, twice, at 151 s.)
     Seen with a gain spread of std 0.15 on 3 x 34 s: the gain-spread fit ended with its force
     law bent (width 0.18, the truth 0.10); a 15 ms rise lag then cut the held-out
     simulation error by 30 % and was accepted, by letting the force law return.  The gain
     spread alone, refitted from there, simulated the trials as well (0.0280 against
     0.0288 rad/s)."""
     without, with_it = pooled_rmse(check.sim_fitted), pooled_rmse(best.sim_fitted)
-    if without >= pooled_rmse(current.sim_fitted) or with_it <= (1.0 - min_gain) * without:
+    if without >= pooled_rmse(current.sim_fitted) or with_it <= (1.0 - 0.5 * min_gain) * without:
         return None
     return (f"the model without it, refitted from where this fit ended, simulates the trials "
             f"it was fitted to as well ({without:.4f} against {with_it:.4f} rad/s; need "
-            f"{100 * min_gain:.0f} % lower with it): the gain came from a better optimum of "
+            f"{50 * min_gain:.0f} % lower with it): the gain came from a better optimum of "
             f"the current model, not from {best.effects[-1]}")
 
 
