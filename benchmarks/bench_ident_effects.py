@@ -124,7 +124,7 @@ def run_restarted() -> None:
     res = SEL.identify(trials, k_folds=3, max_effects=2, analyse_residuals=False)
     dt = time.perf_counter() - t0
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'}"
-                       + ("" if e.accepted else f" ({e.reason.rsplit('; ', 1)[-1]})")
+                       + ("" if e.accepted else f" ({e.reason.split('refused: ')[-1]})")
                        for r in res.rounds for e in r)
     print(f"gain spread std 0.15, 3 x 34 s, plant seed 4, up to 2 effects: chosen "
           f"{res.chosen or 'none'}; final model: {res.final.reason}; held-out simulation error "
