@@ -83,7 +83,8 @@ def shared_prefix_speedup(w: float) -> tuple[float, float]:
         simulate_batch(st, np.tile(mpc.pv, (n, 1)), TICK, ticks, np.empty((n, ticks, 3)))
 
     def shared():
-        predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, w, 0.0, 1.0, True, costs, means)
+        predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, w, 0.0, 1.0, True, costs, means,
+                            1)
 
     out = []
     for f in (full, shared):

@@ -207,7 +207,7 @@ def cost_59(speed: np.ndarray, q: np.ndarray, reference: float, d: float = 0.0,
 def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: float,
                         max_ticks: int, reference: float, d: float, terminal_weight: float,
                         time_weighted: bool, costs: np.ndarray, means: np.ndarray,
-                        pads: int = 1) -> int:
+                        pads: int) -> int:
     """Predict every candidate over the next ``pads`` cycles and cost it, sharing the prefix.
 
     ``s0`` (S_SIZE,) is the wheel with the current actuator on; ``cands`` (n, 2) hold

@@ -164,7 +164,8 @@ def test_shared_prefix_predictor_equals_the_full_horizon_simulation(w):
     for tw in (False, True):
         full = np.array([cost_59(out[i, :, 1], out[i, :, 2], 1.5, 0.1, 1.0, tw) for i in range(n)])
         fast, means = np.empty(n), np.empty(n)
-        k = predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, 1.5, 0.1, 1.0, tw, fast, means)
+        k = predict_cycle_costs(s, mpc.pv, mpc.cands, TICK, ticks, 1.5, 0.1, 1.0, tw, fast, means,
+                                1)
         assert np.array_equal(np.isfinite(full), np.isfinite(fast)) and np.isfinite(fast).sum() > 20
         ok = np.isfinite(full)
         assert np.allclose(fast[ok], full[ok], rtol=1e-12, atol=0.0)

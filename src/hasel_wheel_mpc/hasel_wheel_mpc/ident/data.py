@@ -72,6 +72,8 @@ class Trial:
 
     def __post_init__(self) -> None:
         where = self.source or self.name
+        # one memory layout for the compiled simulators (a column of a table is strided)
+        self.t = np.ascontiguousarray(self.t, dtype=float)
         n = self.t.shape[0]
         for k in ("angle", "q", "eta", "n_a", "phi_a", "phi_d"):
             if getattr(self, k).shape != (n,):
