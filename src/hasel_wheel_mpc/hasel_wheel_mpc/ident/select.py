@@ -55,11 +55,11 @@ A refit refused although it cuts the window RMSE on all trials by at least half 
 with the current model's other values, and the better fit of the windows is kept and judged.
 The windows then say the effect is there while the free run does not, which happens when the
 refit stayed in the bent force law of a current model that had absorbed the effect.  Seen
-with a weak off-centre mass (0.002 N*m at -2 rad, 3 x 34 s, plant seed 7): the nominal fit's
-force law had width 0.24 (the truth 0.10); the COM refit from there cut the window RMSE by
-41 % and the held-out simulation error not at all (-1.7 %), so nothing was named; from the
-reference force law it converged to 0.00201 N*m at -2.02 rad and cut that error by 35 %
-(the true model: 37 %).  Tested in test_ident_effects.py.
+with a weak off-centre mass (0.002 N*m at -2 rad, 3 x 34 s, plant seed 7; ad-hoc runs): the
+nominal fit's force law had width 0.24 (the truth 0.10); the COM refit from there cut the
+window RMSE by 41 % and the held-out simulation error not at all (-1.7 %), so nothing was
+named; from the reference force law it converged to 0.00201 N*m at -2.02 rad and cut that
+error by 35 % (the true model: 37 %).  Tested in test_ident_effects.py.
 
 The best accepted candidate joins the model only if its gain is its own: the current model
 is refitted from where the augmented fit ended (30 evaluations, no folds), and when that
