@@ -63,6 +63,10 @@ class Candidate:
     #: (:mod:`.screen`): for an effect far from linear in its parameters, whose one
     #: Gauss-Newton step from a single start under-predicts what a refit finds
     screen_at: tuple[dict[str, float], ...] = ()
+    #: a grid of its own parameter values at which the error is evaluated, not predicted
+    #: (:mod:`.screen`): for an effect whose Gauss-Newton step is good only close to the
+    #: optimum, the grid finds where that is
+    scan: tuple[dict[str, float], ...] = ()
 
     @property
     def size(self) -> int:
@@ -184,7 +188,10 @@ LIBRARY: tuple[Candidate, ...] = (
               (ParamSpec("tau", "s", 0.005, 1e-5, 0.5, 0.01),), _rise,
               lambda x: {"time_constant_s": float(x[0])}, "on_time",
               lambda x: {"rise_time": float(x[0])},
-              screen_at=({"tau": 0.02}, {"tau": 0.06})),
+              screen_at=({"tau": 0.02}, {"tau": 0.06}),
+              # 10 ms to 0.32 s in steps of 2: from the nearest point (within a factor of
+              # sqrt(2)) the scan's short fit reaches the optimum
+              scan=tuple({"tau": 0.01 * 2.0 ** k} for k in range(6))),
     Candidate("charge_retention", "actuators weaken with accumulated HV time",
               (ParamSpec("rate", "1/s", 1e-3, 0.0, 1.0, 1e-2),
                ParamSpec("recovery", "s", 60.0, 1.0, 1e5, 60.0)), _retention,

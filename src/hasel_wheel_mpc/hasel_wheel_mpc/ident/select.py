@@ -92,11 +92,10 @@ from . import periodic
 from .metrics import TrialMetrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
 from .residual import Diagnostics, analyse
-from .screen import Screening, screen
+from .screen import SCREEN_P, Screening, screen
 from .threads import with_one_blas_thread
 
 
-SCREEN_P = 1e-6     # score-test p-value below which a candidate is refitted in full
 
 
 @dataclass
