@@ -23,6 +23,10 @@ candidates                 [{round, id, score_statistic, score_dof, score_p,
                             heldout_window_rmse_rad (null: not cross-validated, the fit
                             on all trials did not beat the current model), wald_p,
                             accepted, reason}]
+tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_rad, wald_p,
+                            accepted, reason}] two effects refitted together because each
+                            alone fitted the windows better but was refused
+                            (select.supported_pair); [] when none
 unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p_value,
                             text, phase_rad, torque_ci95_N_m}] structure left in the final
                             model's residual; [] when none.  A signature periodic in an
@@ -178,9 +182,16 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                        "physical": c.describe(x),
                        "physical_ci95": _physical_ci(ident.final, c, x),
                        "wald_p": _num(ev.wald_p)})
-    candidates = []
+    candidates, together = [], []
     for k, scs in enumerate(ident.screenings):
-        evs = {e.effects[-1]: e for e in (ident.rounds[k] if k < len(ident.rounds) else [])}
+        rd = ident.rounds[k] if k < len(ident.rounds) else []
+        one = min((len(e.effects) for e in rd), default=0)     # the current model + one
+        evs = {e.effects[-1]: e for e in rd if len(e.effects) == one}
+        together += [{"round": k + 1, "ids": list(e.effects[one - 1:]),
+                      "window_rmse_rad": _num(e.fit.rmse),
+                      "heldout_window_rmse_rad": _num(e.heldout_rmse), "wald_p": _num(e.wald_p),
+                      "accepted": bool(e.accepted), "reason": e.reason}
+                     for e in rd if len(e.effects) > one]
         for s in scs:
             e = evs.get(s.candidate)
             candidates.append({
@@ -210,6 +221,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
         "chosen_effects": list(ident.chosen),
         "effects": chosen,
         "candidates": candidates,
+        "tried_together": together,
         "unexplained": [] if after is None else [
             {"axis": s.axis, "unit": s.unit, "period": _num(s.period),
              "amplitude_rad_s2": _num(s.amplitude), "torque_N_m": _num(s.torque),
@@ -339,6 +351,13 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
         verdict = "**accepted**" if c["accepted"] else c["reason"]
         L += [f"| {c['round']} | `{c['id']}` | {c['score_statistic']:.1f} ({c['score_dof']}) | "
               f"{c['score_p']:.1e} | {ho} | {wp} | {verdict} |"]
+    for c in data["tried_together"]:
+        held = c["heldout_window_rmse_rad"]
+        ho = (f"{1e3 * c['window_rmse_rad']:.3f} / " +
+              (f"{1e3 * held:.3f}" if held is not None else "not cross-validated"))
+        L += [f"| {c['round']} | " + " + ".join(f"`{i}`" for i in c["ids"]) + f" | – | – | {ho} "
+              f"| {'–' if c['wald_p'] is None else format(c['wald_p'], '.1e')} | "
+              f"{'**accepted**' if c['accepted'] else c['reason']} |"]
     L += ["", "![evidence](evidence.png)", ""]
     L += ["## Residual diagnostics", ""]
     for label, d in (("nominal", ident.diagnostics_before), ("identified", ident.diagnostics_after)):

@@ -90,19 +90,28 @@ def scan_places(prob: Problem, candidate: Candidate, places: list[dict[str, floa
                 x_start: np.ndarray, significant: float) -> list[dict[str, float]]:
     """Further places to screen ``candidate`` from, found by its ``scan`` grid.
 
-    At each of ``places`` the squared window error is evaluated at every grid value (the
-    other parameters held at the place).  Where the lowest lies below the error with the
+    At each of ``places`` the squared window error is evaluated along the grid, outward from
+    the start value (the other parameters held at the place), until it has risen by more than
+    ``significant`` above the lowest so far: past that minimum it rose on, in every profile
+    seen (a rise lag's error at a fixed force law).  Where the lowest lies below the error with the
     candidate at its start value by more than ``significant`` [rad^2] (the score test's
     critical drop), the effect is there at that place alone, and a short fit of every
     parameter (:data:`SCAN_NFEV` evaluations) from that grid value gives a place close
     enough to the optimum for the Gauss-Newton step.  ``x_start`` (w, 2) warm-starts the
     window starts.  Returns the short fits' values, one dict per place where the scan found
     the effect (none on data without it, so nothing is spent there)."""
-    found = []
+    found: list[dict[str, float]] = []
+    if not candidate.scan:
+        return found
     for place in places:
-        null = _sse(prob, place, x_start)
-        sse, at = min(((_sse(prob, {**place, **g}, x_start), g) for g in candidate.scan),
-                      key=lambda e: e[0], default=(math.inf, None))
+        null = sse = _sse(prob, place, x_start)
+        at = None
+        for g in candidate.scan:
+            e = _sse(prob, {**place, **g}, x_start)
+            if e < sse:
+                sse, at = e, g
+            elif e > sse + significant:
+                break               # past the lowest: the error rises from here on
         if at is not None and null - sse > significant:
             found.append(prob.fit(start={**place, **at}, x0=x_start, max_nfev=SCAN_NFEV).values)
     return found
