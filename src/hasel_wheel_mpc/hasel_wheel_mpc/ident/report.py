@@ -26,7 +26,9 @@ candidates                 [{round, id, score_statistic, score_dof, score_p,
 tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_rad, wald_p,
                             accepted, reason}] two effects refitted together because each
                             alone fitted the windows better but was refused
-                            (select.supported_pair); [] when none
+                            (select.supported_pair), or one alone was accepted and the
+                            other, refused, fitted the held-out windows as well
+                            (select.tied_pair); [] when none
 unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p_value,
                             text, phase_rad, torque_ci95_N_m}] structure left in the final
                             model's residual; [] when none.  A signature periodic in an
