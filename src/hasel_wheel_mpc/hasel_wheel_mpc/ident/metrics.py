@@ -140,6 +140,30 @@ def simulate_ensemble(problem: Problem, theta: np.ndarray, trial: Trial,
     return x1, q
 
 
+def steady_tail(trial: Trial) -> np.ndarray:
+    """(n,) bool: the samples of the steady-state error, the last ``STEADY`` s of the drive
+    (the last half of it when shorter)."""
+    driven = np.flatnonzero(trial.n_a >= 0)
+    end = int(driven[-1]) + 1 if driven.size else trial.t.shape[0]
+    t_end = trial.t[end - 1]
+    length = min(STEADY, 0.5 * (t_end - trial.t[0]))
+    return (trial.t > t_end - length) & (np.arange(trial.t.shape[0]) < end)
+
+
+def drift_text(trials: list[Trial], metrics: dict[str, TrialMetrics]) -> str:
+    """The free run's steady-state error trial by trial, slowest trial first, in words:
+    "+0.072 rad/s at 1.14 rad/s (phi_a_1deg), ..." (the measured steady speed over
+    :func:`steady_tail`)."""
+    rows = []
+    for tr in trials:
+        m = metrics.get(tr.name)
+        tail = steady_tail(tr)
+        if m is None or not tail.any() or not math.isfinite(m.steady_state_error):
+            continue
+        rows.append((float(np.mean(measured_speed(tr)[tail])), m.steady_state_error, tr.name))
+    return ", ".join(f"{e:+.3f} rad/s at {v:.2f} rad/s ({name})" for v, e, name in sorted(rows))
+
+
 def trial_metrics(problem: Problem, theta: np.ndarray, trial: Trial,
                   x0: tuple[float, float], ensemble: int = ENSEMBLE) -> TrialMetrics:
     """The simulation error of ``trial`` (see :func:`simulate_trial` for the arguments),
@@ -156,11 +180,7 @@ def trial_metrics(problem: Problem, theta: np.ndarray, trial: Trial,
     starts = np.column_stack([x0[0] + shifts, np.full(ensemble, x0[1])])
     x1, _ = simulate_ensemble(problem, theta, trial, starts)
     e = speed_from_angle(trial.t, x1) - v_meas                     # (ensemble, n)
-    driven = np.flatnonzero(trial.n_a >= 0)
-    end = int(driven[-1]) + 1 if driven.size else trial.t.shape[0]
-    t_end = trial.t[end - 1]
-    length = min(STEADY, 0.5 * (t_end - trial.t[0]))
-    tail = (trial.t > t_end - length) & (np.arange(trial.t.shape[0]) < end)
+    tail = steady_tail(trial)
     n = v_meas.shape[0]
     sse = float(np.sum(e * e)) / ensemble                          # mean over the ensemble
     ess = float(np.mean(e[:, tail])) if tail.any() else math.nan

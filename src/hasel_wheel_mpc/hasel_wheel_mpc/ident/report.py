@@ -16,7 +16,7 @@ fits                       {nominal: F, final: F}, F = {converged, evaluations, 
 chosen_effects             [stable identifier, ...] in the order chosen; [] when none
 effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             physical: {...}, physical_ci95: {name: [lo, hi]}, wald_p}]
-                            for the chosen ones
+                            for the chosen ones (wald_p: "absent" in the final model)
 candidates                 [{round, id, score_statistic, score_dof, score_p,
                             predicted_window_rmse_rad, refitted, converged (null: not
                             refitted), window_rmse_rad,
@@ -36,7 +36,11 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             (ident/periodic.py): torque_N_m * sin(2 pi x / period +
                             phase_rad) along its axis x, with a 95 % interval; phase_rad
                             and torque_ci95_N_m are null where it is sized from the
-                            residual alone
+                            residual alone.  Axis "autocorrelation" (unit s, period null):
+                            a residual that is not white while no axis shows structure;
+                            amplitude_rad_s2 is the constant acceleration error per window
+                            that leaves as much correlated residual
+                            (residual.autocorrelation_signature)
 metrics                    {before: M, after: M}, M = {window_rmse_rad, heldout_window_rmse_rad,
                             simulation: {pooled_fitted_rmse_rad_s, pooled_heldout_rmse_rad_s,
                             per_trial: {name: {fitted: T, heldout: T}}}},
@@ -74,7 +78,7 @@ from ..paper import TABLE_III
 from .metrics import TrialMetrics, pooled_rmse
 from .prediction import PREDICTION_SPAN
 from .residual import Diagnostics
-from .select import Evaluation, Identification
+from .select import Evaluation, Identification, effect_wald_p
 
 SCHEMA = "hasel_wheel.identification/1"
 
@@ -177,13 +181,11 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
     for cid in ident.chosen:
         c = BY_ID[cid]
         x = np.array([ident.final.fit.values[p.name] for p in c.params])
-        ev = next((e for rd in ident.rounds for e in rd if e.effects[-1] == cid and e.accepted),
-                  ident.final)
         chosen.append({"id": cid, "title": c.title,
                        "parameters": _params(ident.final, [p.name for p in c.params]),
                        "physical": c.describe(x),
                        "physical_ci95": _physical_ci(ident.final, c, x),
-                       "wald_p": _num(ev.wald_p)})
+                       "wald_p": _num(effect_wald_p(ident.final.fit, c))})
     candidates, together = [], []
     for k, scs in enumerate(ident.screenings):
         rd = ident.rounds[k] if k < len(ident.rounds) else []

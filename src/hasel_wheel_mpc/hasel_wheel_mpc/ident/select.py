@@ -111,7 +111,7 @@ from .candidates import BY_ID, LIBRARY, Candidate
 from .data import Trial
 from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates
 from . import periodic
-from .metrics import TrialMetrics, pooled_rmse, trial_metrics
+from .metrics import TrialMetrics, drift_text, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
 from .residual import Diagnostics, analyse
 from .screen import SCREEN_P, Screening, screen
@@ -308,6 +308,13 @@ def pick(evs: list[Evaluation]) -> Evaluation | None:
         return None
     best = min(good, key=lambda e: e.heldout_rmse)
     tie = tied(evs, best)
+    both = [e for e in good if tie is not None
+            and set(best.effects) | set(tie.effects) <= set(e.effects)]
+    if both:
+        # the two were tried together (tied_pair) and passed: the pair is named
+        pair = min(both, key=lambda e: e.heldout_rmse)
+        best.reason += f"; named together with {tie.effects[-1]} ({'+'.join(pair.effects)})"
+        return pair
     if tie is not None:
         best.accepted = False
         best.reason += (f"; not named: {'+'.join(tie.effects)} (refused) fits the held-out "
@@ -319,11 +326,13 @@ def pick(evs: list[Evaluation]) -> Evaluation | None:
 
 
 def tied(evs: list[Evaluation], best: Evaluation) -> Evaluation | None:
-    """A refused, plausible refit among ``evs`` that fits the held-out windows at least as
-    well as the accepted ``best`` (see :func:`pick`), or None."""
+    """The refused, plausible refit among ``evs`` that fits the held-out windows best, if
+    at least as well as the accepted ``best`` (see :func:`pick`), else None.  A refit of
+    effects that ``best`` holds all of (one of a pair) is no rival to it."""
     tie = [e for e in evs if not e.accepted and e.plausible
-           and e.heldout_rmse <= best.heldout_rmse]
-    return tie[0] if tie else None
+           and e.heldout_rmse <= best.heldout_rmse
+           and not set(e.effects) <= set(best.effects)]
+    return min(tie, key=lambda e: e.heldout_rmse) if tie else None
 
 
 def tied_pair(evs: list[Evaluation], current: Evaluation
@@ -476,8 +485,7 @@ def judge(ev: Evaluation, added: tuple[Candidate, ...], current: Evaluation, min
     (one effect, or two tried together) against ``current`` (the rules in the module
     docstring); ``odd`` is why its values are implausible, or None.  The Wald p is the
     largest of the added effects': each must differ from "no effect"."""
-    ev.wald_p = max(wald_p(ev.fit, c) if c.id != "charge_retention" else _retention_p(ev.fit)
-                    for c in added)
+    ev.wald_p = max(effect_wald_p(ev.fit, c) for c in added)
     gain = 1.0 - ev.heldout_rmse / current.heldout_rmse
     sim_gain = 1.0 - ev.sim_heldout_rmse / current.sim_heldout_rmse
     ev.plausible = odd is None
@@ -615,11 +623,11 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             # a refused refit that the windows back may be held down by a second effect:
             # the next significant candidates get their own refits (and the pair below)
             say(f"  {sc.candidate}: refitted as well, since "
-                f"{'+'.join(e.effects[-1] for e in evs if backed(e, current, min_gain))} "
+                f"{' and '.join(e.effects[-1] for e in evs if backed(e, current, min_gain))} "
                 f"cut the window RMSE but was refused")
             evs.append(refit(sc))
-            if evs[-1].accepted:
-                break
+            if evs[-1].accepted or sum(backed(e, current, min_gain) for e in evs) >= 2:
+                break       # accepted, or two backed refits for supported_pair
         pair = (supported_pair(evs, current, min_gain) or tied_pair(evs, current)) \
             if len(chosen) + 2 <= max_effects else ()
         if pair:
@@ -694,6 +702,11 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # what is left unexplained and periodic in an angle: sized by a refit (the residual
         # alone shows only what the fit did not already absorb), the two strongest
         sigs = ident.diagnostics_after.signatures
+        for sig in sigs:
+            if sig.axis == "autocorrelation":
+                # no axis shows it; the free run does: its drift trial by trial
+                sig.text += ("; the free run's steady-state speed error (simulated minus "
+                             "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
         for i in todo:
             say(f"sizing the unexplained signature: {sigs[i].text}")
@@ -704,6 +717,12 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
 
 #: Unexplained periodic signatures sized by a refit (:mod:`.periodic`), strongest first.
 MEASURED_SIGNATURES = 2
+
+
+def effect_wald_p(fit: FitResult, effect: Candidate) -> float:
+    """p-value of "``effect`` is absent" in ``fit`` (:func:`wald_p`; for charge retention
+    the one-sided test of its rate, :func:`_retention_p`)."""
+    return wald_p(fit, effect) if effect.id != "charge_retention" else _retention_p(fit)
 
 
 def _retention_p(fit: FitResult) -> float:
