@@ -136,3 +136,7 @@ def test_a_gain_that_a_restart_of_the_current_model_also_reaches_is_not_the_effe
     assert optimum_not_effect(current, best, _sim(("gain_spread",), 0.0304)) is None
     # the restart found nothing better than the current model: no question arises
     assert optimum_not_effect(current, best, _sim(("gain_spread",), 0.0387)) is None
+    # a pair tried together is named whole
+    why = optimum_not_effect(_sim((), 0.0387), _sim(("viscous_drag", "rise_lag"), 0.0288),
+                             _sim((), 0.0280))
+    assert why is not None and "not from viscous_drag+rise_lag" in why

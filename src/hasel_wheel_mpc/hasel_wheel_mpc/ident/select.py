@@ -382,7 +382,7 @@ def optimum_not_effect(current: Evaluation, best: Evaluation, check: Evaluation,
     return (f"the model without it, refitted from where this fit ended, simulates the trials "
             f"it was fitted to as well ({without:.4f} against {with_it:.4f} rad/s; need "
             f"{50 * min_gain:.0f} % lower with it): the gain came from a better optimum of "
-            f"the current model, not from {best.effects[-1]}")
+            f"the current model, not from {'+'.join(best.effects[len(current.effects):])}")
 
 
 def refit_order(scores: list[Screening], rmse: float, min_gain: float = 0.10,
@@ -661,14 +661,15 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # effect's fit happened to reach?  Refit the current model from where it ended
         check = evaluate(trials, base, chosen, window,
                          {k: v for k, v in best.fit.values.items()
-                          if k not in {p.name for p in BY_ID[best.effects[-1]].params}},
+                          if k not in {p.name for i in best.effects[len(chosen):]
+                                       for p in BY_ID[i].params}},
                          folds, threads, refuse=lambda f: "a check, not cross-validated",
                          x0=best.fit.z[len(best.fit.names):].reshape(-1, 2), max_nfev=30)
         why = optimum_not_effect(current, best, check, min_gain)
         if why is not None:
             best.accepted = False
             best.reason += "; refused: " + why
-            say(f"  {best.effects[-1]}: {why}")
+            say(f"  {'+'.join(best.effects[len(chosen):])}: {why}")
             if restarted:
                 break
             restarted = True
