@@ -443,7 +443,8 @@ def autocorrelation_signature(diag: Diagnostics, inertia: float) -> Signature | 
     hoc): every axis p = 1, no signature, the nominal free run 2.9x and 3.5x worse than the
     true model's; the mean autocorrelation over lags of up to 0.2 s was 0.069 and 0.041 (on
     5 x 60 s, seed 13: 0.025 for the drag).  For models with the right effects, and on data
-    without one, it stayed within -0.002..0.003.  Counted when above ``CORRELATED_SHARE``
+    without one, it stayed within -0.002..0.003 (5 runs: clean and the drag or a 200 ms rise
+    lag identified, 3 x 34 s and 5 x 60 s).  Counted when above ``CORRELATED_SHARE``
     and five standard deviations of a white residual's.  The fraction of lags outside the
     99 % band is no use for this: it grows with the length of the data for the right model
     too (0.15 on clean 5 x 60 s data, 0.37 with viscous drag identified).
