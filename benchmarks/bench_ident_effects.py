@@ -15,7 +15,9 @@ For each effect, switched on alone in the plant and never declared to the tool, 
   0.05/s), with the 95 % interval of each estimate.
 
 Then two effects that the nominal fit absorbs by bending its force law far (3 x 34 s, plant
-seed 7): a weak off-centre mass and a 120 ms rise lag.  Then a gain spread whose fit ends in a poorer optimum (the check that an effect's gain is its own,
+seed 7): a weak off-centre mass and a 120 ms rise lag.  Then a rise lag plus viscous drag
+named together, and viscous drag outside the library reported as a residual that is not
+white (3 x 34 s, plant seeds 11 and 12).  Then a gain spread whose fit ends in a poorer optimum (the check that an effect's gain is its own,
 select.optimum_not_effect).  Then every effect of the realistic plant at once (up to four chosen; REALISTIC in
 hasel_wheel_sim.effects, with the link effects), as a real wheel would have them.
 Then the closed loop on a COM plant: tracking RMSE with the nominal and with the true model in
@@ -130,6 +132,50 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str,
           f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
 
 
+def run_two_and_outside() -> None:
+    """Two cases on 3 x 34 s: a 50 ms rise lag plus viscous drag of 1e-3 (plant seed 11),
+    named together since select.further_refits / tied_pair; and viscous drag of 1.5e-3 with
+    its candidate left out (plant seed 12), reported as a residual that is not white
+    (residual.autocorrelation_signature), then with the whole library."""
+    visc = {"viscous_drag": {"enabled": True, "coefficient": {"value": 1e-3,
+                                                             "unit": "N*m*s/rad"}}}
+    rise = {"rise_lag": {"enabled": True, "time_constant": {"value": 0.05, "unit": "s"}}}
+    trials = S.record_set(SHORT, config=PlantConfig(
+        seed=11, switching="tick", effects=effects_from_mapping({**ENCODER, **visc, **rise})))
+    t0 = time.perf_counter()
+    res = SEL.identify(trials, k_folds=3, analyse_residuals=False)
+    dt = time.perf_counter() - t0
+    v = res.final.fit.values
+    base = WheelParams()
+    ref = M.model_error(trials, base, (C.BY_ID["viscous_drag"], C.BY_ID["rise_lag"]),
+                        dict(F.force_coordinates(base), tau_f=base.tau_f, c=1e-3, tau=0.05))
+    before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
+    refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
+                       f"({e.reason.split(';')[0]})" for r in res.rounds for e in r)
+    print(f"rise lag 50 ms + viscous drag 1e-3, 3 x 34 s, plant seed 11: chosen "
+          f"{res.chosen or 'none'}; c {v.get('c', math.nan):.4g} (true 0.001), tau "
+          f"{v.get('tau', math.nan):.4g} (true 0.05); held-out simulation error {before:.4f}"
+          f" -> {after:.4f} rad/s (x{before / after:.2f}; true model {ref:.4f}: "
+          f"x{before / ref:.2f}); refits: {refits}; {dt:.0f} s")
+    drag = {"viscous_drag": {"enabled": True, "coefficient": {"value": 1.5e-3,
+                                                             "unit": "N*m*s/rad"}}}
+    trials = S.record_set(SHORT, config=PlantConfig(
+        seed=12, switching="tick", effects=effects_from_mapping({**ENCODER, **drag})))
+    for label, lib in (("its candidate left out", C.library(exclude=["viscous_drag"])),
+                       ("the whole library", C.LIBRARY)):
+        t0 = time.perf_counter()
+        res = SEL.identify(trials, library=lib, k_folds=3)
+        dt = time.perf_counter() - t0
+        d = res.diagnostics_after
+        sigs = "; ".join(s.text for s in d.signatures) or "none"
+        print(f"viscous drag 1.5e-3, 3 x 34 s, plant seed 12, {label}: chosen "
+              f"{res.chosen or 'none'}; held-out simulation error "
+              f"{res.nominal.sim_heldout_rmse:.4f} -> {res.final.sim_heldout_rmse:.4f} rad/s;"
+              f" mean autocorrelation over 0.2 s {d.correlated_share:.4f} (white sd "
+              f"{d.correlated_share_sd:.4f}); lags outside the 99 % band "
+              f"{100 * d.whiteness_outside:.0f} %; unexplained: {sigs}; {dt:.0f} s")
+
+
 def run_restarted() -> None:
     """A gain spread of std 0.15 on 3 x 34 s (plant seed 4), up to two effects: the gain
     spread's fit ends in a poorer optimum, from which a rise lag offers a way out; the check
@@ -187,6 +233,7 @@ def main() -> None:
                 run(label, effect, cid, truth, SHORT, "3 x 34 s")
         for label, (effect, cid, truth) in BENT.items():
             run(label, effect, cid, truth, SHORT, "3 x 34 s, plant seed 7", seed=7)
+        run_two_and_outside()
         run_restarted()
         run_realistic()
     closed_loop_on_com()

@@ -36,7 +36,6 @@ def test_the_mean_autocorrelation_of_an_ar1_residual_matches_its_closed_form(phi
     got = np.mean([R.correlated_share(R.correlation(x, x, lags)[lags:], n)[0]
                    for x in (_ar1(phi, n, seed) for seed in range(8))])
     assert got == pytest.approx(phi * (1 - phi ** lags) / ((1 - phi) * lags), abs=tol)
-    assert R.correlated_share(np.ones(lags + 1), n)[1] == pytest.approx(1 / math.sqrt(n * lags))
 
 
 def test_a_correlated_residual_without_structure_gets_a_signature_a_white_one_none():
