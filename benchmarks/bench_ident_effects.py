@@ -133,8 +133,10 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str,
 
 
 def run_two_and_outside() -> None:
-    """Two cases on 3 x 34 s: a 50 ms rise lag plus viscous drag of 1e-3 (plant seed 11),
-    named together since select.further_refits / tied_pair; and viscous drag of 1.5e-3 with
+    """Cases on 3 x 34 s: a 50 ms rise lag plus viscous drag of 1e-3 (plant seed 11), named
+    together since select.further_refits / tied_pair; viscous drag of 1e-3 plus a gain
+    spread of std 0.1 (plant seed 4), named together since select.supported_pair; and
+    viscous drag of 1.5e-3 with
     its candidate left out (plant seed 12), reported as a residual that is not white
     (residual.autocorrelation_signature), then with the whole library."""
     visc = {"viscous_drag": {"enabled": True, "coefficient": {"value": 1e-3,
@@ -157,6 +159,21 @@ def run_two_and_outside() -> None:
           f"{v.get('tau', math.nan):.4g} (true 0.05); held-out simulation error {before:.4f}"
           f" -> {after:.4f} rad/s (x{before / after:.2f}; true model {ref:.4f}: "
           f"x{before / ref:.2f}); refits: {refits}; {dt:.0f} s")
+    spread = {"gain_spread": {"enabled": True, "std": {"value": 0.1, "unit": "1"}}}
+    trials = S.record_set(SHORT, config=PlantConfig(
+        seed=4, switching="tick", effects=effects_from_mapping({**ENCODER, **visc, **spread})))
+    t0 = time.perf_counter()
+    res = SEL.identify(trials, k_folds=3, analyse_residuals=False)
+    dt = time.perf_counter() - t0
+    v = res.final.fit.values
+    std = (C.BY_ID["gain_spread"].describe([v[f"d{i}"] for i in range(1, 16)])["std"]
+           if "gain_spread" in res.chosen else math.nan)
+    refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
+                       f"({e.reason.split(';')[0]})" for r in res.rounds for e in r)
+    print(f"viscous drag 1e-3 + gain spread std 0.1, 3 x 34 s, plant seed 4: chosen "
+          f"{res.chosen or 'none'}; c {v.get('c', math.nan):.4g} (true 0.001), gain std "
+          f"{std:.3f}; held-out simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
+          f"{res.final.sim_heldout_rmse:.4f} rad/s; refits: {refits}; {dt:.0f} s")
     drag = {"viscous_drag": {"enabled": True, "coefficient": {"value": 1.5e-3,
                                                              "unit": "N*m*s/rad"}}}
     trials = S.record_set(SHORT, config=PlantConfig(

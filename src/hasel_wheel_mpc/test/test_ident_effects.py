@@ -204,7 +204,7 @@ def test_a_slow_rise_lag_that_the_force_law_bends_to_mimic_is_found_by_the_scan(
 def test_two_effects_that_each_fail_the_free_run_alone_are_named_together():
     # viscous drag and a gain spread at once (plant seed 4): each refitted alone cuts the
     # window RMSE by ~14 %, but the gain spread alone raised the held-out simulation error
-    # (-5.7 %) and the drag alone raised it on its own trials; nothing was named.  The two are
+    # (-5.1 %) and the drag alone raised it on its own trials; nothing was named.  The two are
     # refitted together (select.supported_pair)
     both = {**VISCOUS, "gain_spread": {"enabled": True, "std": {"value": 0.1, "unit": "1"}}}
     trials = _trials(both, seed=4)

@@ -67,8 +67,8 @@ together, from the better window fit with the other's own values, and judged as 
 (each must pass the Wald test; :func:`supported_pair`).  Two effects at once can each fit
 the windows better alone while neither makes the free run better, because each leaves the
 force law bent by the other.  Seen with viscous drag and a gain spread (plant seed 4, 3 x 34
-s): nothing was named; together they cut the held-out simulation error 2.2x (0.0643 ->
-0.0289 rad/s), with c 1.012e-3 (the truth 1e-3) and a gain std of 0.105 (the plant drew
+s): nothing was named; together they cut the held-out simulation error 2.3x (0.0643 ->
+0.0279 rad/s; bench_ident_effects.py), with c 1.012e-3 (the truth 1e-3) and a gain std of 0.105 (the plant drew
 0.110); tested.
 
 When no refit of a round is accepted and just one is backed by the windows in that way, the next
@@ -441,7 +441,7 @@ def supported_pair(evs: list[Evaluation], current: Evaluation,
     run better: the force law the other effect has bent stays.  Seen with viscous drag
     (1e-3 N*m*s/rad) and a gain spread (std 0.1) together, 3 x 34 s, plant seed 4 (ad hoc):
     the gain spread alone cut the window RMSE by 14 % and the held-out simulation error by
-    -5.7 %, the drag alone 13 % and raised the simulation error on its own trials; nothing
+    -5.1 %, the drag alone 13 % and raised the simulation error on its own trials; nothing
     was named.  With plant seed 7 the drag was accepted first and the spread after it."""
     if any(e.accepted for e in evs):
         return ()
