@@ -132,44 +132,45 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str,
           f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
 
 
+def _identify_short(effects: dict, seed: int):
+    """(trials, identification, wall time [s], the refits in words) for ``effects`` on
+    3 x 34 s, without the residual analysis."""
+    trials = S.record_set(SHORT, config=PlantConfig(
+        seed=seed, switching="tick", effects=effects_from_mapping({**ENCODER, **effects})))
+    t0 = time.perf_counter()
+    res = SEL.identify(trials, k_folds=3, analyse_residuals=False)
+    dt = time.perf_counter() - t0
+    refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
+                       f"({e.reason.split(';')[0]})" for r in res.rounds for e in r)
+    return trials, res, dt, refits
+
+
 def run_two_and_outside() -> None:
     """Cases on 3 x 34 s: a 50 ms rise lag plus viscous drag of 1e-3 (plant seed 11), named
     together since select.further_refits / tied_pair; viscous drag of 1e-3 plus a gain
     spread of std 0.1 (plant seed 4), named together since select.supported_pair; and
-    viscous drag of 1.5e-3 with
-    its candidate left out (plant seed 12), reported as a residual that is not white
+    viscous drag of 1.5e-3 with its candidate left out (plant seed 12), reported as a
+    residual that is not white
     (residual.autocorrelation_signature), then with the whole library."""
     visc = {"viscous_drag": {"enabled": True, "coefficient": {"value": 1e-3,
                                                              "unit": "N*m*s/rad"}}}
     rise = {"rise_lag": {"enabled": True, "time_constant": {"value": 0.05, "unit": "s"}}}
-    trials = S.record_set(SHORT, config=PlantConfig(
-        seed=11, switching="tick", effects=effects_from_mapping({**ENCODER, **visc, **rise})))
-    t0 = time.perf_counter()
-    res = SEL.identify(trials, k_folds=3, analyse_residuals=False)
-    dt = time.perf_counter() - t0
+    trials, res, dt, refits = _identify_short({**visc, **rise}, seed=11)
     v = res.final.fit.values
     base = WheelParams()
     ref = M.model_error(trials, base, (C.BY_ID["viscous_drag"], C.BY_ID["rise_lag"]),
                         dict(F.force_coordinates(base), tau_f=base.tau_f, c=1e-3, tau=0.05))
     before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
-    refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
-                       f"({e.reason.split(';')[0]})" for r in res.rounds for e in r)
     print(f"rise lag 50 ms + viscous drag 1e-3, 3 x 34 s, plant seed 11: chosen "
           f"{res.chosen or 'none'}; c {v.get('c', math.nan):.4g} (true 0.001), tau "
           f"{v.get('tau', math.nan):.4g} (true 0.05); held-out simulation error {before:.4f}"
           f" -> {after:.4f} rad/s (x{before / after:.2f}; true model {ref:.4f}: "
           f"x{before / ref:.2f}); refits: {refits}; {dt:.0f} s")
     spread = {"gain_spread": {"enabled": True, "std": {"value": 0.1, "unit": "1"}}}
-    trials = S.record_set(SHORT, config=PlantConfig(
-        seed=4, switching="tick", effects=effects_from_mapping({**ENCODER, **visc, **spread})))
-    t0 = time.perf_counter()
-    res = SEL.identify(trials, k_folds=3, analyse_residuals=False)
-    dt = time.perf_counter() - t0
+    _, res, dt, refits = _identify_short({**visc, **spread}, seed=4)
     v = res.final.fit.values
     std = (C.BY_ID["gain_spread"].describe([v[f"d{i}"] for i in range(1, 16)])["std"]
            if "gain_spread" in res.chosen else math.nan)
-    refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
-                       f"({e.reason.split(';')[0]})" for r in res.rounds for e in r)
     print(f"viscous drag 1e-3 + gain spread std 0.1, 3 x 34 s, plant seed 4: chosen "
           f"{res.chosen or 'none'}; c {v.get('c', math.nan):.4g} (true 0.001), gain std "
           f"{std:.3f}; held-out simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
