@@ -69,7 +69,7 @@ from hasel_wheel_driver.samples import Command
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import advance
 from hasel_wheel_sim.jit import jit
-from hasel_wheel_sim.model import SECTOR, Extensions, param_vector
+from hasel_wheel_sim.model import SECTOR, Extensions, reading_param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.wheel import TICK, initial_state
 
@@ -370,7 +370,7 @@ class Mpc:
     def __init__(self, params: WheelParams | None = None, extensions: Extensions | None = None,
                  config: MpcConfig | None = None, clock=time.perf_counter) -> None:
         self.config = config or MpcConfig()
-        self.pv = param_vector(params or WheelParams(), extensions)
+        self.pv = reading_param_vector(params or WheelParams(), extensions)
         self._base = initial_state(mode="tick")
         self.clock = clock
         self.seq = 0

@@ -29,7 +29,7 @@ from hasel_wheel_driver.samples import ENCODER_COUNT as COUNT
 from hasel_wheel_driver.samples import PadEdges, TelemetrySample
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import rk4
-from hasel_wheel_sim.model import SECTOR, Extensions, param_vector
+from hasel_wheel_sim.model import SECTOR, Extensions, reading_param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.wheel import initial_state
 
@@ -99,7 +99,7 @@ class Observer:
                  config: ObserverConfig | None = None) -> None:
         self.params = params or WheelParams()
         self.config = config or ObserverConfig()
-        self.pv = param_vector(self.params, extensions)
+        self.pv = reading_param_vector(self.params, extensions)
         self._s = initial_state()          # scratch state for the flow: q, eta, phi_a, on-time
         self._commands: dict[int, tuple[float, float]] = {}
         self.x: np.ndarray | None = None    # (xi1 [rad], xi2 [rad/s], c, a, b, e, f [rad/s^2])

@@ -1,8 +1,9 @@
 """Real-wheel effects the paper's model lacks, configured from YAML (all off by default).
 
-Dynamic effects change the physics and are passed to the model as
+Model effects change the physics (or, for ``angle_eccentricity``, what the firmware's
+angle sensor reads, on which it switches) and are passed to the model as
 :class:`~hasel_wheel_sim.model.Extensions`, so the plant, the MPC predictor and the
-identification share them.  Sensor and link effects only exist in the plant.
+identification share them.  Sensor noise and link effects only exist in the plant.
 
 ========================  =========================================================  ============
 effect (YAML key)         what it does                                               direction
@@ -13,6 +14,7 @@ com_offset                axle torque -torque * sin(xi1 + phase)                
 viscous_drag              axle torque -coefficient * xi2                              lower speed, faster coast-down
 rise_lag                  force x (1 - exp(-t_on / time_constant))                    weaker pushes, lower speed
 platform_disturbance      axle torque torque * sin((r/L) xi1 + phase)                 ripple once per lap of the pivot
+angle_eccentricity        angle read as xi1 + amplitude * sin(xi1 + phase)            1/rev reading error, ~ speed
 encoder                   10-bit quantisation (floor) plus Gaussian angle noise       measured angle error
 encoder_glitches          a sample's count replaced by a random one, probability p   isolated outliers
 dropouts                  a telemetry sample is lost, probability p                  missing samples
@@ -56,6 +58,11 @@ EFFECT_FIELDS: dict[str, dict[str, FieldSpec]] = {
         "torque": FieldSpec("N*m", 0.0, 1.0, low_closed=True, doc="amplitude"),
         "phase": FieldSpec("rad", -math.pi, math.pi, True, True, doc="pivot angle of the peak"),
     },
+    "angle_eccentricity": {
+        "amplitude": FieldSpec("rad", 0.0, 0.2, low_closed=True, high_closed=True,
+                               doc="first-harmonic error of the angle reading (disc offset / radius)"),
+        "phase": FieldSpec("rad", -math.pi, math.pi, True, True, doc="phase of the error"),
+    },
     "encoder": {
         "noise_std": FieldSpec("rad", 0.0, 0.1, low_closed=True, doc="Gaussian angle noise"),
     },
@@ -73,10 +80,11 @@ EFFECT_FIELDS: dict[str, dict[str, FieldSpec]] = {
 }
 
 
-#: Effects that change the dynamics (they become :class:`Extensions`); the others are the
-#: sensor and link effects, which only the plant has.
+#: Effects the model carries (they become :class:`Extensions`): the dynamics, and the angle
+#: sensor's eccentricity, on whose reading the firmware switches; the others are the sensor
+#: noise and link effects, which only the plant has.
 DYNAMIC_EFFECTS = ("charge_retention", "gain_spread", "com_offset", "viscous_drag", "rise_lag",
-                   "platform_disturbance")
+                   "platform_disturbance", "angle_eccentricity")
 
 
 @dataclass(frozen=True)
@@ -112,6 +120,8 @@ class EffectsConfig:
             rise_time=self.get("rise_lag", "time_constant"),
             retention_rate=self.get("charge_retention", "rate"),
             retention_recovery=self.get("charge_retention", "recovery", 300.0),
+            angle_eccentricity=self.get("angle_eccentricity", "amplitude"),
+            angle_eccentricity_phase=self.get("angle_eccentricity", "phase"),
             gains=gains,
         )
 
@@ -137,9 +147,11 @@ class EffectsConfig:
             "viscous_drag": {"coefficient": ext.viscous},
             "rise_lag": {"time_constant": ext.rise_time},
             "charge_retention": {"rate": ext.retention_rate, "recovery": ext.retention_recovery},
+            "angle_eccentricity": {"amplitude": ext.angle_eccentricity,
+                                   "phase": ext.angle_eccentricity_phase},
         })
         enabled = self.enabled | {"com_offset", "platform_disturbance", "viscous_drag", "rise_lag",
-                                  "charge_retention"}
+                                  "charge_retention", "angle_eccentricity"}
         return EffectsConfig(frozenset(enabled), values, tuple(float(g) for g in ext.gains))
 
 

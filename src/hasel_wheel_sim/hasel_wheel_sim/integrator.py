@@ -19,7 +19,8 @@ import numpy as np
 
 from . import layout as L
 from .jit import jit, jit_inline, jit_kernel, jit_parallel, prange
-from .model import N_ACTUATORS, SECTOR, acceleration, sector_of, unwrap_target
+from .model import (N_ACTUATORS, SECTOR, acceleration, angle_at_reading, angle_reading, sector_of,
+                    unwrap_target)
 
 #: Tolerance of event location on the wheel angle [rad].
 EVENT_TOL = 1e-12
@@ -136,12 +137,16 @@ def _flow(s: np.ndarray, gain: float, pv: np.ndarray, dt: float, x: float, v: fl
 
 
 @jit_kernel
-def _latch(s: np.ndarray, n_a: float, phi_a: float, phi_d: float, seq: float) -> None:
-    """Latch u = (n_a, phi_a, phi_d): the eta, Delta, delta parts of the jump map (52)."""
-    n = unwrap_target(n_a, phi_a, s[L.S_XI1])
+def _latch(s: np.ndarray, pv: np.ndarray, n_a: float, phi_a: float, phi_d: float,
+           seq: float) -> None:
+    """Latch u = (n_a, phi_a, phi_d): the eta, Delta, delta parts of the jump map (52).
+
+    The firmware switches when its angle *reading* reaches N pi/8 + phi; the switching
+    angles are kept as the wheel angles where that happens (the same with an exact sensor)."""
+    n = unwrap_target(n_a, phi_a, angle_reading(s[L.S_XI1], pv))
     s[L.S_ETA] = n
-    s[L.S_THETA_ON] = n * SECTOR + phi_a
-    s[L.S_THETA_OFF] = n * SECTOR + phi_d
+    s[L.S_THETA_ON] = angle_at_reading(n * SECTOR + phi_a, pv)
+    s[L.S_THETA_OFF] = angle_at_reading(n * SECTOR + phi_d, pv)
     s[L.S_PHI_A] = phi_a
     s[L.S_PHI_D] = phi_d
     s[L.S_CMD_SEQ] = seq
@@ -149,12 +154,12 @@ def _latch(s: np.ndarray, n_a: float, phi_a: float, phi_d: float, seq: float) ->
 
 
 @jit_kernel
-def _next_command(s: np.ndarray) -> bool:
+def _next_command(s: np.ndarray, pv: np.ndarray) -> bool:
     """Latch the next command if there is one: the pending command first, else the
     built-in open-loop schedule.  Returns False when there is none (the wheel idles)."""
     if s[L.S_PEND] != 0.0:
         s[L.S_PEND] = 0.0
-        _latch(s, s[L.S_PEND_NA], s[L.S_PEND_PHI_A], s[L.S_PEND_PHI_D], s[L.S_PEND_SEQ])
+        _latch(s, pv, s[L.S_PEND_NA], s[L.S_PEND_PHI_A], s[L.S_PEND_PHI_D], s[L.S_PEND_SEQ])
         return True
     auto = int(s[L.S_AUTO])
     if auto == L.AUTO_OFF:
@@ -162,13 +167,13 @@ def _next_command(s: np.ndarray) -> bool:
     if auto == L.AUTO_AFTER_ACTIVE and s[L.S_N_ON] > 0:
         base = s[L.S_ETA]
     else:  # after the sector measured now (eq. (40)), also used for the very first target
-        base = sector_of(s[L.S_XI1])
+        base = sector_of(angle_reading(s[L.S_XI1], pv))
     n_a = float((int(base) + 1) % N_ACTUATORS)
     phi_a = s[L.S_AUTO_PHI_A]
     if s[L.S_PRIME_LEFT] > 0.0:
         s[L.S_PRIME_LEFT] -= 1.0
         phi_a = s[L.S_PRIME_PHI_A]
-    _latch(s, n_a, phi_a, s[L.S_AUTO_PHI_D], -1.0)
+    _latch(s, pv, n_a, phi_a, s[L.S_AUTO_PHI_D], -1.0)
     return True
 
 
@@ -183,7 +188,7 @@ def _record(ev: np.ndarray, n: int, s: np.ndarray, kind: int) -> int:
 
 
 @jit_kernel
-def _switch(s: np.ndarray, ev: np.ndarray, n_ev: int) -> int:
+def _switch(s: np.ndarray, pv: np.ndarray, ev: np.ndarray, n_ev: int) -> int:
     """Apply the jump (52) due now: switch-on if q = 0, switch-off (and latch) if q = 1."""
     if s[L.S_Q] == 0.0:
         s[L.S_Q] = 1.0
@@ -193,7 +198,7 @@ def _switch(s: np.ndarray, ev: np.ndarray, n_ev: int) -> int:
     s[L.S_Q] = 0.0
     s[L.S_N_OFF] += 1.0
     n_ev = _record(ev, n_ev, s, L.EV_OFF)  # eta of the actuator that switched off
-    if not _next_command(s):
+    if not _next_command(s, pv):
         s[L.S_ARMED] = 0.0
     return n_ev
 
@@ -209,7 +214,7 @@ def _advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
     # while no actuator is on, a waiting command takes effect now: it arms an idle wheel or
     # replaces a target that has not switched on (which a stopped wheel might never reach)
     if s[L.S_Q] == 0.0 and (s[L.S_ARMED] == 0.0 or s[L.S_PEND] != 0.0):
-        if _next_command(s):
+        if _next_command(s, pv):
             n_ev = _record(ev, n_ev, s, L.EV_ARM)
     exact = s[L.S_MODE] == L.MODE_EXACT
     remaining = h
@@ -237,7 +242,7 @@ def _advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
         if h_sw <= h_st:
             _flow(s, gain, pv, h_sw, x_sw, v_sw)
             remaining -= h_sw
-            n_ev = _switch(s, ev, n_ev)
+            n_ev = _switch(s, pv, ev, n_ev)
         else:
             _flow(s, gain, pv, h_st, x_st, 0.0)
             remaining -= h_st
@@ -245,7 +250,7 @@ def _advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
     if not exact and s[L.S_ARMED] != 0.0:
         target = s[L.S_THETA_OFF] if s[L.S_Q] != 0.0 else s[L.S_THETA_ON]
         if s[L.S_XI1] >= target:
-            n_ev = _switch(s, ev, n_ev)
+            n_ev = _switch(s, pv, ev, n_ev)
     return n_ev
 
 

@@ -31,7 +31,9 @@ P_GAINS = 21         # 16 per-actuator gains [1]
 P_BIAS_TORQUE = P_GAINS + 16   # disturbance torque c + a cos(xi1) + b sin(xi1) [N*m]: 0 in the
 P_BIAS_COS = P_BIAS_TORQUE + 1  #   plant; the observer and the MPC's prediction carry the
 P_BIAS_SIN = P_BIAS_TORQUE + 2  #   observer's disturbance estimate here (c, a, b)
-P_SIZE = P_BIAS_SIN + 1
+P_READ_COS = P_BIAS_SIN + 1     # angle reading = xi1 + P_READ_COS cos(xi1) + P_READ_SIN sin(xi1)
+P_READ_SIN = P_BIAS_SIN + 2     #   [rad]: an eccentric angle sensor (0 = exact reading)
+P_SIZE = P_READ_SIN + 1
 
 # ---- state vector ---------------------------------------------------------------------
 S_T = 0            # simulated time [s]

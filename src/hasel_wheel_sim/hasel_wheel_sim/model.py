@@ -45,6 +45,10 @@ EXTENSION_FIELDS: dict[str, FieldSpec] = {
     "rise_time": FieldSpec("s", 0.0, 1.0, True, True, doc="actuator force build-up; 0 = instant"),
     "retention_rate": FieldSpec("1/s", 0.0, 10.0, True, True, doc="force loss per s of HV time"),
     "retention_recovery": FieldSpec("s", 0.0, 1e6, False, True, doc="recovery time constant"),
+    "angle_eccentricity": FieldSpec("rad", 0.0, 0.2, True, True,
+                                    doc="first-harmonic error of the angle reading"),
+    "angle_eccentricity_phase": FieldSpec("rad", -math.pi, math.pi, True, True,
+                                          doc="wheel angle where the reading error peaks is pi/2 - phase"),
 }
 #: Unit and allowed range of each of the 16 actuator gains.
 GAIN_SPEC = FieldSpec("1", 0.0, 10.0, False, True, doc="per-actuator force gain")
@@ -64,6 +68,10 @@ class Extensions:
         accumulates Q_i with dQ_i/dt = q_i - Q_i / retention_recovery [s of HV time]; its force
         is scaled by exp(-retention_rate * Q_i).
     ``gains`` [1] x16: per-actuator force gain (fabrication spread).
+    ``angle_eccentricity`` [rad], ``angle_eccentricity_phase`` [rad]: the angle sensor reads
+        xi1 + angle_eccentricity * sin(xi1 + phase) (an encoder disc or magnet off the axle).
+        Not a torque: the firmware switches the actuators when its *reading* reaches the
+        switching angle, and every recorded angle is a reading (:func:`angle_reading`).
     """
 
     com_torque: float = 0.0
@@ -74,6 +82,8 @@ class Extensions:
     rise_time: float = 0.0
     retention_rate: float = 0.0
     retention_recovery: float = 300.0
+    angle_eccentricity: float = 0.0
+    angle_eccentricity_phase: float = 0.0
     gains: tuple[float, ...] = field(default=(1.0,) * N_ACTUATORS)
 
     def __post_init__(self) -> None:
@@ -114,7 +124,60 @@ def param_vector(p: WheelParams, ext: Extensions | None = None) -> np.ndarray:
     pv[L.P_RET_RECOVERY] = ext.retention_recovery
     pv[L.P_BAND_LO], pv[L.P_BAND_HI] = force_band(p)
     pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS] = ext.gains
+    # e sin(xi1 + phase) = e sin(phase) cos(xi1) + e cos(phase) sin(xi1)
+    pv[L.P_READ_COS] = ext.angle_eccentricity * math.sin(ext.angle_eccentricity_phase)
+    pv[L.P_READ_SIN] = ext.angle_eccentricity * math.cos(ext.angle_eccentricity_phase)
     return pv
+
+
+def reading_param_vector(p: WheelParams, ext: Extensions | None = None) -> np.ndarray:
+    """:func:`param_vector` for a model that works on the angle readings themselves (the
+    observer and the MPC): the sensor's eccentricity is left out (P_READ_* = 0), so their
+    switching angles are readings, as the firmware's are.  Its effect on the dynamics seen
+    through the readings (a torque error of order amplitude x the torque) is neglected."""
+    pv = param_vector(p, ext)
+    pv[L.P_READ_COS] = pv[L.P_READ_SIN] = 0.0
+    return pv
+
+
+@jit_inline
+def angle_reading(xi1: float, pv: np.ndarray) -> float:
+    """What the angle sensor reads [rad] at the wheel angle xi1 [rad]:
+    xi1 + P_READ_COS cos(xi1) + P_READ_SIN sin(xi1) (xi1 itself for an exact sensor)."""
+    a = pv[L.P_READ_COS]
+    b = pv[L.P_READ_SIN]
+    if a == 0.0 and b == 0.0:
+        return xi1
+    return xi1 + a * math.cos(xi1) + b * math.sin(xi1)
+
+
+@jit_inline
+def angle_at_reading(m: float, pv: np.ndarray) -> float:
+    """The wheel angle [rad] at which the sensor reads m [rad] (the inverse of
+    :func:`angle_reading`).  The reading's slope 1 - a sin + b cos stays >= 1 - 0.2 for the
+    amplitudes allowed (<= 0.2 rad), so it is increasing and Newton's iteration from m
+    converges quadratically; 8 steps reach rounding."""
+    a = pv[L.P_READ_COS]
+    b = pv[L.P_READ_SIN]
+    if a == 0.0 and b == 0.0:
+        return m
+    x = m
+    for _ in range(8):
+        c = math.cos(x)
+        s = math.sin(x)
+        f = x + a * c + b * s - m
+        x -= f / (1.0 - a * s + b * c)
+        if abs(f) < 1e-15:
+            break
+    return x
+
+
+def angle_readings(xi1: np.ndarray, pv: np.ndarray) -> np.ndarray:
+    """:func:`angle_reading` of an array of wheel angles xi1 (n,) [rad] -> (n,) [rad]."""
+    a, b = float(pv[L.P_READ_COS]), float(pv[L.P_READ_SIN])
+    if a == 0.0 and b == 0.0:
+        return xi1
+    return xi1 + a * np.cos(xi1) + b * np.sin(xi1)
 
 
 #: The force law is taken as 0 where its bump is below exp(-BAND_EXPONENT) of its peak.

@@ -14,6 +14,8 @@ A model file is a ``wheel_params.yaml`` with two optional sections more::
       rise_time:          {value: 0.0,   unit: s}
       retention_rate:     {value: 0.0,   unit: 1/s}
       retention_recovery: {value: 300.0, unit: s}
+      angle_eccentricity: {value: 0.0,   unit: rad}
+      angle_eccentricity_phase: {value: 0.0, unit: rad}
       gains:              {value: [1.0, ..., 1.0], unit: "1"}     # 16 entries
     provenance:                  # free mapping, not interpreted: tool, date, data files, effects
       tool: hasel_wheel ident
@@ -161,7 +163,8 @@ def describe_model(wheel_params_file: str, model_file: str, ext: Extensions) -> 
     default = Extensions()
     changed = [f"{name}={getattr(ext, name):.4g}" for name in
                ("com_torque", "com_phase", "platform_torque", "platform_phase", "viscous",
-                "rise_time", "retention_rate", "retention_recovery")
+                "rise_time", "retention_rate", "retention_recovery", "angle_eccentricity",
+                "angle_eccentricity_phase")
                if getattr(ext, name) != getattr(default, name)]
     if tuple(ext.gains) != tuple(default.gains):
         changed.append(f"gains {min(ext.gains):.3f}..{max(ext.gains):.3f}")

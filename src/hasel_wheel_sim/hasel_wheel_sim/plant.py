@@ -20,7 +20,7 @@ from hasel_wheel_driver.samples import ENCODER_COUNT, ENCODER_COUNTS, Command, T
 
 from . import layout as L
 from .effects import EffectsConfig, effects_from_mapping
-from .model import Extensions
+from .model import Extensions, angle_reading
 from .model_file import load_model
 from .params import ParameterError, WheelParams, load_wheel_params, load_yaml_file
 from .wheel import TICK, HybridWheel, SwitchMode
@@ -172,8 +172,7 @@ class Plant:
         s = self.wheel.s
         self.sequence += 1
         z, u_glitch, u_drop = self._draws.next()
-        xi1 = s[L.S_XI1]
-        measured = xi1 + z * self._noise
+        measured = angle_reading(s[L.S_XI1], self.wheel.pv) + z * self._noise
         counts = math.floor(measured / COUNT)
         angle = counts * COUNT if self._quantise else measured
         raw = counts % ENCODER_COUNTS

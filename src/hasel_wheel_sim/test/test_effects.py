@@ -143,6 +143,59 @@ def test_encoder_noise_has_its_standard_deviation():
     assert np.std(err) == pytest.approx(math.sqrt(0.01**2 + COUNT**2 / 12), rel=0.05)
 
 
+ECCENTRIC = {"angle_eccentricity": {"enabled": True, "amplitude": {"value": 0.03, "unit": "rad"},
+                                   "phase": {"value": 0.7, "unit": "rad"}}}
+
+
+def test_eccentric_sensor_reads_its_first_harmonic_error():
+    p = _plant(ECCENTRIC)
+    err, xs = [], []
+    for _ in range(900):                        # ~1 turn at 2 rad/s
+        s = p.step()
+        xs.append(p.wheel.s[L.S_XI1])
+        err.append(s.angle - xs[-1])
+    np.testing.assert_allclose(err, 0.03 * np.sin(np.asarray(xs) + 0.7), atol=1e-12)
+
+
+@pytest.mark.parametrize("switching", ["exact", "tick"])
+def test_firmware_switches_where_its_reading_reaches_the_switching_angle(params, switching):
+    """The firmware sees only the reading m = xi1 + e sin(xi1 + phase): each switch-on is
+    where m reaches N pi/8 + phi_a (exactly, or on the first tick after), not where xi1 does."""
+    cfg = PlantConfig(switching=switching, effects=effects_from_mapping(ECCENTRIC))
+    p = Plant(params, cfg, xi2=2.0)
+    p.open_loop(D(5), D(20))
+    ons = []
+    for _ in range(1500):
+        p.step()
+        ons += [(x, eta) for _, x, kind, eta in p.last_events if kind == L.EV_ON]
+    assert len(ons) > 16                       # more than a turn
+    reading = np.array([x + 0.03 * math.sin(x + 0.7) for x, _ in ons])
+    target = np.array([eta * math.pi / 8 + D(5) for _, eta in ons])
+    true_at_target = np.array([x - (m - t) / (1 + 0.03 * math.cos(x + 0.7))
+                               for (x, _), m, t in zip(ons, reading, target)])
+    if switching == "exact":
+        np.testing.assert_allclose(reading, target, atol=1e-9)
+    else:                                       # late by at most one tick of travel
+        assert np.all(reading >= target - 1e-12)
+        assert np.all(reading - target <= 2.5 * TICK * 1.04)
+    # the error is not negligible: where xi1 itself reaches the angle is up to 30 mrad away
+    assert np.max(np.abs(true_at_target - target)) > 0.02
+
+
+def test_angle_reading_inverse_and_range():
+    from hasel_wheel_sim.model import angle_at_reading, angle_reading, param_vector
+    from hasel_wheel_sim.params import ParameterError, WheelParams
+    pv = param_vector(WheelParams(), Extensions(angle_eccentricity=0.2, angle_eccentricity_phase=-2.0))
+    for m in np.linspace(-7.0, 30.0, 97):
+        assert angle_reading(angle_at_reading(m, pv), pv) == pytest.approx(m, abs=1e-13)
+    with pytest.raises(ParameterError, match="angle_eccentricity.*0.3"):
+        Extensions(angle_eccentricity=0.3)
+    with pytest.raises(ParameterError, match="amplitude"):
+        effects_from_mapping({"angle_eccentricity": {"enabled": True,
+                                                     "amplitude": {"value": 0.5, "unit": "rad"},
+                                                     "phase": {"value": 0.0, "unit": "rad"}}})
+
+
 @pytest.mark.parametrize("effect", ["dropouts", "encoder_glitches"])
 def test_sample_faults_happen_at_their_rate(effect):
     p = _plant({effect: {"enabled": True, "probability": {"value": 0.05, "unit": "1"}}})

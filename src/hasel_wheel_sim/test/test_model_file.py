@@ -18,7 +18,8 @@ from hasel_wheel_sim.params import packaged
 GAINS = tuple(1.0 + 0.01 * i for i in range(16))
 EXT = Extensions(com_torque=0.00398, com_phase=0.505, platform_torque=0.0021,
                  platform_phase=-1.25, viscous=4.5e-4, rise_time=0.012, retention_rate=0.0093,
-                 retention_recovery=287.5, gains=GAINS)
+                 retention_recovery=287.5, angle_eccentricity=0.0071, angle_eccentricity_phase=0.3,
+                 gains=GAINS)
 # not exactly representable in binary: the file must still give back the same doubles
 PARAMS = WheelParams().with_values(tau_f=0.010412345678901234, sigma5=-0.1 / 3.0)
 
