@@ -34,7 +34,7 @@ import numpy as np
 from scipy import optimize, stats
 
 from hasel_wheel_sim import layout as L
-from hasel_wheel_sim.model import N_ACTUATORS, param_vector
+from hasel_wheel_sim.model import N_ACTUATORS, angle_readings, param_vector
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .candidates import Candidate, ParamSpec
@@ -300,16 +300,25 @@ class Problem:
 
     def residual(self, z: np.ndarray) -> np.ndarray:
         x1, _ = self.simulate(z)
-        return self.output_error(x1)
+        return self.output_error(x1, self.model(self.full_theta(z[:len(self.free)]))[0])
 
-    def output_error(self, x1: np.ndarray) -> np.ndarray:
+    def readings(self, z: np.ndarray, x1: np.ndarray) -> np.ndarray:
+        """(n,) the angle sensor's readings [rad] of the wheel angles x1 (n,) [rad] under the
+        model of the packed vector z (x1 itself unless an eccentricity is fitted)."""
+        return angle_readings(x1, self.model(self.full_theta(z[:len(self.free)]))[0])
+
+    def output_error(self, x1: np.ndarray, pv: np.ndarray) -> np.ndarray:
         """(n,) simulated minus measured angle [rad], 0 at rejected samples.
+
+        The simulated wheel angles x1 (n,) are first turned into what the sensor of the
+        model ``pv`` reads (:func:`~hasel_wheel_sim.model.angle_readings`).
 
         When the angles are encoder counts (``self.quantum`` [rad], found in the data), a
         reading y says only that the angle lies in [y, y + quantum): the error is the
         distance from that interval (0 inside).  Taking y itself as the angle would add the
         encoder's sawtooth, which at 300 Hz aliases into slow errors that correlate with
         speed and bias the force law (by ~5 % in its peak)."""
+        x1 = angle_readings(x1, pv)
         if self.quantum is None:
             return np.where(self.ok, x1 - self.y, 0.0)
         return np.where(self.ok, x1 - np.clip(x1, self.y, self.y + self.quantum), 0.0)
@@ -340,7 +349,7 @@ class Problem:
     def _shoot(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray,
                x0: np.ndarray) -> np.ndarray:
         self._shoot_windows(eta, gains, self._every, x0, pv, self._out1, self._out2)
-        return self.output_error(self._out1)
+        return self.output_error(self._out1, pv)
 
     def _shoot_windows(self, eta: np.ndarray, gains: np.ndarray, windows: np.ndarray,
                        x0: np.ndarray, pv: np.ndarray, out1: np.ndarray,
@@ -393,7 +402,7 @@ class Problem:
         scratch = np.zeros(self.n)
         every = np.arange(self.n_windows)
         self._shoot_windows(eta, gains, every, x0, pv, out[0], out[1])
-        r = self.output_error(out[0])
+        r = self.output_error(out[0], pv)
         cost = self._window_sums(r * r)
         d1, d2 = np.zeros(self.n), np.zeros(self.n)
         active = np.ones(self.n_windows, dtype=bool)
@@ -404,7 +413,7 @@ class Problem:
             sel = np.repeat(np.isin(every, windows), lengths)
             for d, e, h in ((d1, (h1, 0.0), h1), (d2, (0.0, h2), h2)):
                 self._shoot_windows(eta, gains, windows, x0 + e, pv, out[1], scratch)
-                d[sel] = (self.output_error(out[1])[sel] - r[sel]) / h
+                d[sel] = (self.output_error(out[1], pv)[sel] - r[sel]) / h
             stale[windows] = False
 
         for _ in range(iterations):
@@ -419,7 +428,7 @@ class Problem:
             trial = x0 + lam[:, None] * step
             np.maximum(trial[:, 1], 0.0, out=trial[:, 1])  # the wheel rolls forwards (or rests)
             self._shoot_windows(eta, gains, windows, trial, pv, out[1], scratch)
-            r_try = self.output_error(out[1])
+            r_try = self.output_error(out[1], pv)
             cost_try = self._window_sums(r_try * r_try)
             take = active & (cost_try <= cost)
             x0[take] = trial[take]

@@ -49,6 +49,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import signal
 
+from hasel_wheel_sim.model import angle_readings
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate
@@ -101,7 +102,8 @@ def measured_speed(trial: Trial) -> np.ndarray:
 def simulate_trial(problem: Problem, theta: np.ndarray, trial: Trial,
                    x0: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Free run of ``trial`` from x0 = (xi1 [rad], xi2 [rad/s]) with the model of ``problem``
-    at its free parameters ``theta`` (g,).  Returns (xi1 (n,) [rad], q (n,) 0/1)."""
+    at its free parameters ``theta`` (g,).  Returns (xi1 (n,) [rad] as its sensor reads it,
+    q (n,) 0/1)."""
     x1, q = simulate_ensemble(problem, theta, trial, np.asarray([x0], dtype=float))
     return x1[0], q[0]
 
@@ -111,7 +113,7 @@ def simulate_ensemble(problem: Problem, theta: np.ndarray, trial: Trial,
     """Free runs of ``trial`` (n samples) with the model of ``problem`` at its free parameters
     ``theta`` (g,), from each row of ``starts`` (k, 2) = (xi1 [rad], xi2 [rad/s]); the runs
     are shared over at least two threads of :func:`~.threads.window_pool`.
-    Returns (xi1 (k, n) [rad], q (k, n) 0/1)."""
+    Returns (xi1 (k, n) [rad] as the model's sensor reads it, q (k, n) 0/1)."""
     pv, extra = problem.model(problem.full_theta(theta))
     acts = trial.activations
     eta = [float(a.eta) for a in acts]
@@ -137,7 +139,7 @@ def simulate_ensemble(problem: Problem, theta: np.ndarray, trial: Trial,
             free_run(trial.t, *args, starts[i].copy(), offset, t_last_on, pv, x1[i], x2[i], q[i])
 
     run_split(run, np.array_split(np.arange(k), min(k, max(problem.threads, 2))))
-    return x1, q
+    return angle_readings(x1, pv), q
 
 
 def steady_tail(trial: Trial) -> np.ndarray:

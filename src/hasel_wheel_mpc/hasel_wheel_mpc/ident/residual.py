@@ -323,7 +323,7 @@ def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnosti
     ok = problem.ok
     # the plain difference from the readings (not the distance from the encoder's count
     # intervals that the fit minimises): its structure is what a user can plot and check
-    r = np.where(ok, x1 - problem.y, 0.0)
+    r = np.where(ok, problem.readings(result.z, x1) - problem.y, 0.0)
     a, valid = acceleration_residual(problem, r)
     band = 2.576 / math.sqrt(max(ok.sum(), 1))
     acf = correlation(r[ok], r[ok], max_lag)[max_lag:]

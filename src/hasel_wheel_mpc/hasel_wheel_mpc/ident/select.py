@@ -108,6 +108,7 @@ from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import BY_ID, LIBRARY, Candidate
+from .consistency import stand_in
 from .data import Trial
 from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates
 from . import periodic
@@ -554,6 +555,18 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     if friction is None:
         reference.pop("tau_f", None)
     restarted = False
+    refused: dict[bytes, str | None] = {}
+
+    def refusal(f: FitResult, effects: tuple[Candidate, ...],
+                added: tuple[Candidate, ...]) -> str | None:
+        """Why the values of ``added`` in the fit ``f`` cannot be the effect they name:
+        implausible values, or a size that trends with the trials' speed (once per fit)."""
+        key = f.z.tobytes() + "+".join(c.id for c in effects).encode()
+        if key not in refused:
+            refused[key] = implausibility(f, added) or stand_in(trials, base, effects, f, added,
+                                                                window, threads)
+        return refused[key]
+
     for round_no in range(max_effects + 1):
         todo = [c for c in library if c not in chosen]
         if not todo or len(chosen) >= max_effects or (round_no == max_effects and not restarted):
@@ -581,7 +594,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             c = BY_ID[sc.candidate]
 
             def odd_values(f: FitResult, c: Candidate = c) -> str | None:
-                return implausibility(f, (c,))
+                return refusal(f, chosen + (c,), (c,))
 
             gates = dict(cv_below=current.fit.rmse, sim_below=pooled_rmse(current.sim_fitted),
                          refuse=odd_values)
@@ -647,8 +660,8 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                            **{p.name: other.fit.values[p.name] for p in added[1].params}},
                           folds, threads, cv_below=current.fit.rmse,
                           sim_below=pooled_rmse(current.sim_fitted),
-                          refuse=lambda f: implausibility(f, added))
-            judge(ev, added, current, min_gain, implausibility(ev.fit, added))
+                          refuse=lambda f: refusal(f, chosen + added, added))
+            judge(ev, added, current, min_gain, refusal(ev.fit, chosen + added, added))
             ev.reason += f"; tried together: {why_pair}"
             evs.append(ev)
             say(f"+ {'+'.join(e.id for e in added)}: "

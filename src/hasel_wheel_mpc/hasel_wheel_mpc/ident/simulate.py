@@ -24,7 +24,7 @@ import numpy as np
 
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.jit import jit, jit_inline, jit_kernel
-from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, acceleration
+from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, acceleration, angle_reading
 
 
 @jit_inline
@@ -110,8 +110,9 @@ def free_run(t: np.ndarray, act_eta: np.ndarray, act_phi_a: np.ndarray, act_phi_
 
     act_* (m,): the recorded activations in order (unwrapped pad, phi_a, phi_d [rad]); j0 the
     activation pending at t[0]; on0 1 if it is on at t[0].  The pending activation switches on
-    at the first sample where the simulated contact angle xi1 - eta pi/8 reaches phi_a, and off
-    where it reaches phi_d; then the next one is pending.  Gains and retained charge follow the
+    at the first sample where the simulated contact angle reaches phi_a, and off where it
+    reaches phi_d, both as the firmware sees it: the sensor's reading of xi1 (pv's
+    eccentricity, :func:`~hasel_wheel_sim.model.angle_reading`) less eta pi/8; then the next one is pending.  Gains and retained charge follow the
     simulated switching (pv's gains, retention rate and recovery).  Nothing switches on after
     ``t_last_on`` [s] (when the recording's last activation switched on), so a simulation
     that runs slower does not drive on past the recorded drive.  x0 = (xi1, xi2) at t[0].
@@ -128,7 +129,7 @@ def free_run(t: np.ndarray, act_eta: np.ndarray, act_phi_a: np.ndarray, act_phi_
     recovery = pv[L.P_RET_RECOVERY]
     for k in range(t.shape[0]):
         if j < m:
-            xc = x1 - (act_eta[j] + eta_offset) * SECTOR
+            xc = angle_reading(x1, pv) - (act_eta[j] + eta_offset) * SECTOR
             if on == 0 and xc >= act_phi_a[j] and t[k] <= t_last_on:
                 on = 1
                 t_on = t[k]

@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.wheel import TICK
@@ -36,6 +37,10 @@ class SyntheticTrial:
 
 #: The paper's five fitting trials (Fig. 9): phi_a = 1, 3, 5, 7, 9 deg at phi_d = 22 deg.
 PAPER_SET = tuple(SyntheticTrial(math.radians(a)) for a in (1.0, 3.0, 5.0, 7.0, 9.0))
+#: Three short trials (phi_a 1, 4, 7 deg; 25 s driven, 9 s coasting): the tests' data set.
+SHORT_SET = tuple(SyntheticTrial(math.radians(a), drive=25.0, coast=9.0) for a in (1.0, 4.0, 7.0))
+#: The 10-bit encoder with 1 mrad Gaussian noise, as a plant ``effects`` entry.
+ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.001, "unit": "rad"}}}
 
 
 def record(spec: SyntheticTrial, params: WheelParams | None = None,
@@ -82,3 +87,11 @@ def record_set(specs=PAPER_SET, params: WheelParams | None = None,
         cfg = PlantConfig(seed=config.seed + i, switching=config.switching, effects=effects)
         out.append(record(spec, params, cfg))
     return out
+
+
+def encoder_trials(effects: dict, seed: int = 3, specs=SHORT_SET) -> list[Trial]:
+    """:func:`record_set` of ``specs`` on a plant with :data:`ENCODER` and ``effects`` (a plant
+    ``effects`` mapping, see :mod:`hasel_wheel_sim.effects`), tick switching, seed ``seed``."""
+    cfg = PlantConfig(seed=seed, switching="tick",
+                      effects=effects_from_mapping({**ENCODER, **effects}))
+    return record_set(specs, config=cfg)

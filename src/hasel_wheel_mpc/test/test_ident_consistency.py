@@ -1,0 +1,93 @@
+"""An effect refitted trial by trial (ident/consistency.py): the trend of its size with the
+trials' speed against its closed form, and on plant data the right effect against a stand-in."""
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from hasel_wheel_mpc.ident import candidates as C
+from hasel_wheel_mpc.ident import consistency as K
+from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.ident.fit import Problem, coastdown_friction
+from hasel_wheel_sim.params import WheelParams
+
+
+def test_the_trend_is_the_weighted_regression_on_log_speed():
+    # sizes exactly on a + b (ln v - mean_w ln v): k = b / a, and the slope's p-value is
+    # 2 sf(|b| / sd(b)) with var(b) = 1 / sum w (x - mean_w x)^2
+    v = np.array([2.0, 2.6, 3.1, 3.5])
+    var = np.array([0.04, 0.01, 0.02, 0.05])
+    w = 1 / var
+    x = np.log(v)
+    xc = x - np.sum(w * x) / np.sum(w)
+    a, b = 2.0, 0.7
+    m = a + b * xc
+    infos = [np.array([[1 / s]]) for s in var]
+    k, sd, p = K._trend(m[:, None], infos, np.array([a]), list(v))
+    assert k == pytest.approx(b / a, rel=1e-12)
+    sd_b = 1 / math.sqrt(np.sum(w * xc ** 2))
+    assert p == pytest.approx(2 * stats.norm.sf(b / sd_b), rel=1e-9)
+    # delta method with a and b uncorrelated (x centred on its weighted mean)
+    sd_a = 1 / math.sqrt(np.sum(w))
+    assert sd == pytest.approx(abs(k) * math.hypot(sd_b / b, sd_a / a), rel=1e-9)
+    # the direction of a 2-vector effect is projected out: the same sizes along (3, 4)/5
+    d = np.array([0.6, 0.8])
+    infos2 = [np.diag([1 / s, 1 / s]) for s in var]
+    k2, _, p2 = K._trend(m[:, None] * d, infos2, a * d, list(v))
+    assert (k2, p2) == pytest.approx((k, p), rel=1e-9)
+
+
+def test_no_trend_is_formed_without_a_size_or_a_speed_range():
+    infos = [np.eye(1)] * 3
+    assert K._trend(np.zeros((3, 1)), infos, np.zeros(1), [1.0, 2.0, 3.0]) == (0.0, math.inf, 1.0)
+    assert K._trend(np.ones((3, 1)), infos, np.ones(1), [2.0, 2.0, 2.0]) == (0.0, math.inf, 1.0)
+
+
+@pytest.mark.parametrize("p, k, expected", [(1e-4, 1.2, True), (1e-4, -1.2, True),
+                                            (1e-4, 0.3, False), (0.01, 1.2, False)])
+def test_an_effect_is_inconsistent_only_if_its_trend_is_both_significant_and_steep(p, k,
+                                                                                   expected):
+    c = K.Consistency("com_offset", ["A", "B"], ["t"], np.zeros((1, 2)), np.zeros((1, 2)),
+                      np.zeros(2), 0.0, 2, 1.0, 0.0, [1.0], k, 0.1, p)
+    assert K.inconsistent(c) is expected
+    assert not K.inconsistent(None)
+
+
+ECCENTRIC = {"angle_eccentricity": {"enabled": True, "amplitude": {"value": 0.005, "unit": "rad"},
+                                    "phase": {"value": 0.3, "unit": "rad"}}}
+COM = {"com_offset": {"enabled": True, "torque": {"value": 0.004, "unit": "N*m"},
+                      "phase": {"value": 0.5, "unit": "rad"}}}
+
+
+def _consistency(effects: dict, cid: str, seed: int = 13) -> K.Consistency:
+    trials = S.encoder_trials(effects, seed)
+    base = WheelParams()
+    eff = (C.BY_ID[cid],)
+    fit = Problem(trials, base, eff, fixed={"tau_f": coastdown_friction(trials, base).tau_f}).fit()
+    return K.trial_consistency(trials, base, eff, fit, eff[0])
+
+
+@pytest.mark.parametrize("effects, cid", [(COM, "com_offset"), (ECCENTRIC, "angle_eccentricity")])
+def test_the_right_effect_is_the_same_in_every_trial(effects, cid):
+    c = _consistency(effects, cid)
+    assert c.trials == [f"phi_a_{a}deg" for a in (1, 4, 7)]
+    assert c.speeds[0] > 1.3 * c.speeds[2]              # phi_a 1 deg runs fastest
+    assert abs(c.exponent) < 3 * c.exponent_sd + 0.05 and not K.inconsistent(c)
+    # each trial on its own finds the truth within its interval: -0.004 sin(xi1 + 0.5) =
+    # A cos + B sin with (A, B) = -0.004 (sin 0.5, cos 0.5); 0.005 sin(xi1 + 0.3) = E cos +
+    # F sin with (E, F) = 0.005 (sin 0.3, cos 0.3).  chi^2 (2 dof) < 13.8 is p > 0.001
+    truth = (-0.004 * np.array([math.sin(0.5), math.cos(0.5)]) if cid == "com_offset"
+             else 0.005 * np.array([math.sin(0.3), math.cos(0.3)]))
+    for x, sd in zip(c.estimates, c.sd):
+        assert np.sum(((x - truth) / sd) ** 2) < 13.8
+
+
+def test_an_off_centre_mass_standing_in_for_a_reading_error_grows_with_speed():
+    # a reading error e sin(xi1 + phase) is a speed ripple e xi2 cos(...): a torque would
+    # have to be J e xi2^2 to make it, so its size goes with the speed to a power near 2
+    c = _consistency(ECCENTRIC, "com_offset")
+    assert K.inconsistent(c)
+    assert 0.5 < c.exponent < 2.5 and c.trend_p < 1e-6
+    torque = [C.BY_ID["com_offset"].describe(x)["torque_N_m"] for x in c.estimates]
+    assert np.all(np.diff(np.array(torque)[np.argsort(c.speeds)]) > 0)
