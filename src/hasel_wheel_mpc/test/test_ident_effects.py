@@ -181,6 +181,8 @@ def test_a_sensor_eccentricity_outside_the_library_is_not_taken_for_an_off_centr
     assert 0.5 < k < 2.5
     sig = [s for s in res.diagnostics_after.signatures if s.axis == "wheel_angle"]
     assert sig and sig[0].period == pytest.approx(2 * math.pi, rel=0.02)
+    # the signature says how the structure goes with speed, which its size alone does not
+    assert "com_offset is not the same in every trial" in sig[0].text
 
 
 def test_an_effect_refused_from_a_bent_force_law_is_refitted_from_the_reference():

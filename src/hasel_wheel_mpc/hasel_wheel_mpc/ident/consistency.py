@@ -28,6 +28,7 @@ are reported beside it.
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +42,10 @@ from .fit import FitResult, Problem
 
 #: The force law's coordinates (:func:`~.fit.nominal_specs`), refitted in each trial too.
 FORCE_LAW = frozenset({"peak", "centre", "width", "b", "brake_gain"})
+
+#: Evaluation limit of each trial's refit, which starts at the fit on all trials (the folds'
+#: limit too).
+MAX_NFEV = 30
 
 #: A trend of an effect's size with the trials' speed this unlikely by chance (two-sided) ...
 TREND_P = 1e-3
@@ -102,10 +107,20 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
     own = {p.name for p in params}
     held = {n: v for n, v in fit.values.items() if n not in own and n not in FORCE_LAW}
     start = dict(fit.values)
+    # each trial's windows start where the fit on all trials put them (the same windows:
+    # a trial is cut the same way alone), and the trials are fitted side by side, one thread
+    # each (the compiled simulator releases the GIL), as the folds are
+    every = Problem(trials, base, effects, window=window)
+    x_all = fit.z[len(fit.names):].reshape(-1, 2)
+
+    def one(j: int) -> FitResult:
+        prob = Problem([trials[j]], base, effects, window=window, fixed=held)
+        return prob.fit(start=start, x0=x_all[every.trial_windows[j]], max_nfev=MAX_NFEV)
+
+    with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
+        fits = list(pool.map(one, range(len(trials))))
     est, sd, cov, speeds = [], [], [], []
-    for tr in trials:
-        prob = Problem([tr], base, effects, window=window, fixed=held, threads=threads)
-        res = prob.fit(start=start)
+    for tr, res in zip(trials, fits):
         order = [res.names.index(p.name) for p in params]
         est.append(res.theta[order])
         c = res.cov[np.ix_(order, order)]

@@ -556,6 +556,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         reference.pop("tau_f", None)
     restarted = False
     refused: dict[bytes, str | None] = {}
+    stand_ins: dict[str, str] = {}      # candidate -> why it was refused as a stand-in
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
@@ -563,8 +564,12 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         implausible values, or a size that trends with the trials' speed (once per fit)."""
         key = f.z.tobytes() + "+".join(c.id for c in effects).encode()
         if key not in refused:
-            refused[key] = implausibility(f, added) or stand_in(trials, base, effects, f, added,
-                                                                window, threads)
+            why = implausibility(f, added)
+            if why is None:
+                why = stand_in(trials, base, effects, f, added, window, threads)
+                if why is not None:
+                    stand_ins[why.split(" ", 1)[0]] = why
+            refused[key] = why
         return refused[key]
 
     for round_no in range(max_effects + 1):
@@ -726,6 +731,12 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             say(f"sizing the unexplained signature: {sigs[i].text}")
             sigs[i] = periodic.measure(sigs[i], trials, base, chosen, current.fit, window,
                                        threads)
+        # a library effect of the same shape that was refused as a stand-in tells how the
+        # structure goes with speed, which the signature alone does not
+        for sig in sigs:
+            for cid, why in stand_ins.items():
+                if BY_ID[cid].axis == sig.axis and BY_ID[cid] not in chosen:
+                    sig.text += f"; refitted to it, {why}"
     return ident
 
 
