@@ -23,8 +23,8 @@ def test_the_trend_is_the_weighted_regression_on_log_speed():
     xc = x - np.sum(w * x) / np.sum(w)
     a, b = 2.0, 0.7
     m = a + b * xc
-    infos = [np.array([[1 / s]]) for s in var]
-    k, sd, p = K._trend(m[:, None], infos, np.array([a]), list(v))
+    covs = [np.array([[s]]) for s in var]
+    k, sd, p = K._trend(m[:, None], covs, np.array([a]), list(v))
     assert k == pytest.approx(b / a, rel=1e-12)
     sd_b = 1 / math.sqrt(np.sum(w * xc ** 2))
     assert p == pytest.approx(2 * stats.norm.sf(b / sd_b), rel=1e-9)
@@ -33,15 +33,20 @@ def test_the_trend_is_the_weighted_regression_on_log_speed():
     assert sd == pytest.approx(abs(k) * math.hypot(sd_b / b, sd_a / a), rel=1e-9)
     # the direction of a 2-vector effect is projected out: the same sizes along (3, 4)/5
     d = np.array([0.6, 0.8])
-    infos2 = [np.diag([1 / s, 1 / s]) for s in var]
-    k2, _, p2 = K._trend(m[:, None] * d, infos2, a * d, list(v))
+    covs2 = [np.diag([s, s]) for s in var]
+    k2, _, p2 = K._trend(m[:, None] * d, covs2, a * d, list(v))
     assert (k2, p2) == pytest.approx((k, p), rel=1e-9)
+    # a trial whose variance is infinite has no weight: the other three decide
+    covs4 = covs[:3] + [np.array([[math.inf]])]
+    k4, _, _ = K._trend(np.append(m[:3], 99.0)[:, None], covs4, np.array([a]), list(v))
+    k3, _, _ = K._trend(m[:3, None], covs[:3], np.array([a]), list(v[:3]))
+    assert k4 == pytest.approx(k3, rel=1e-9)
 
 
 def test_no_trend_is_formed_without_a_size_or_a_speed_range():
-    infos = [np.eye(1)] * 3
-    assert K._trend(np.zeros((3, 1)), infos, np.zeros(1), [1.0, 2.0, 3.0]) == (0.0, math.inf, 1.0)
-    assert K._trend(np.ones((3, 1)), infos, np.ones(1), [2.0, 2.0, 2.0]) == (0.0, math.inf, 1.0)
+    covs = [np.eye(1)] * 3
+    assert K._trend(np.zeros((3, 1)), covs, np.zeros(1), [1.0, 2.0, 3.0]) == (0.0, math.inf, 1.0)
+    assert K._trend(np.ones((3, 1)), covs, np.ones(1), [2.0, 2.0, 2.0]) == (0.0, math.inf, 1.0)
 
 
 @pytest.mark.parametrize("p, k, expected", [(1e-4, 1.2, True), (1e-4, -1.2, True),
@@ -91,3 +96,11 @@ def test_an_off_centre_mass_standing_in_for_a_reading_error_grows_with_speed():
     assert 0.5 < c.exponent < 2.5 and c.trend_p < 1e-6
     torque = [C.BY_ID["com_offset"].describe(x)["torque_N_m"] for x in c.estimates]
     assert np.all(np.diff(np.array(torque)[np.argsort(c.speeds)]) > 0)
+
+
+def test_a_reading_error_standing_in_for_an_off_centre_mass_falls_with_speed():
+    # an off-centre mass T sin(xi1 + phase) is a speed ripple T / (J xi2): a reading error
+    # would have to be e = T / (J xi2^2), so its size goes with the speed to a power near -2
+    c = _consistency(COM, "angle_eccentricity")
+    assert K.inconsistent(c)
+    assert -4.0 < c.exponent < -0.5 and c.trend_p < 1e-4

@@ -214,7 +214,7 @@ def test_an_effect_refused_from_a_bent_force_law_is_refitted_from_the_reference(
 def test_a_slow_rise_lag_that_the_force_law_bends_to_mimic_is_found_by_the_scan():
     # a 120 ms rise lag (plant seed 7): the nominal fit bends its force law far (peak 83,
     # width 0.23; the truth 19.8, 0.10), and a Gauss-Newton step from there or from the
-    # reference at 5, 20 or 60 ms predicted little (chi^2 46, fourth of seven): an angle
+    # reference at 5, 20 or 60 ms predicted little (chi^2 46, fourth of seven at the time): an angle
     # offset led and was refused, and a gain spread and charge retention were named.  The
     # rise lag's scan finds where the error is lowest, and its short fit starts the refit
     rise = {"rise_lag": {"enabled": True, "time_constant": {"value": 0.12, "unit": "s"}}}

@@ -196,3 +196,15 @@ def test_a_switch_on_seen_only_after_lost_samples_restarts_the_on_time():
     for s in samples[:a] + samples[b:b + 1]:
         obs.step(s)
     assert obs.on_since == samples[b].t
+
+
+def test_the_observer_and_the_mpc_work_on_readings_and_leave_the_eccentricity_out():
+    # they see only readings, on which the firmware also switches: a model file's sensor
+    # eccentricity must not move their switching angles off the readings
+    from hasel_wheel_mpc.mpc import Mpc
+    from hasel_wheel_sim import layout as L
+    from hasel_wheel_sim.model import Extensions
+    ext = Extensions(angle_eccentricity=0.02, angle_eccentricity_phase=0.4, viscous=1e-4)
+    for pv in (Observer(extensions=ext).pv, Mpc(extensions=ext).pv):
+        assert pv[L.P_READ_COS] == 0.0 and pv[L.P_READ_SIN] == 0.0
+        assert pv[L.P_VISCOUS] == 1e-4                     # the rest of the model stays

@@ -137,8 +137,8 @@ class EffectsConfig:
             clash.append("actuator_gains")
         if clash:
             raise ParameterError(
-                f"{where}: {clash} describe the wheel's dynamics, which the model's extensions "
-                f"give here; disable them (keep only sensor/link effects: "
+                f"{where}: {clash} describe the wheel (its dynamics or its angle sensor), which "
+                f"the model's extensions give here; disable them (keep only noise/link effects: "
                 f"{sorted(set(EFFECT_FIELDS) - set(DYNAMIC_EFFECTS))})")
         values = {k: v for k, v in self.values.items() if k not in DYNAMIC_EFFECTS}
         values.update({

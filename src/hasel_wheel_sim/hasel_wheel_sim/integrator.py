@@ -19,8 +19,8 @@ import numpy as np
 
 from . import layout as L
 from .jit import jit, jit_inline, jit_kernel, jit_parallel, prange
-from .model import (N_ACTUATORS, SECTOR, acceleration, angle_at_reading, angle_reading, sector_of,
-                    unwrap_target)
+from .model import (N_ACTUATORS, SECTOR, acceleration, angle_at_reading, angle_reading,
+                    contact_at_switch_on, sector_of, unwrap_target)
 
 #: Tolerance of event location on the wheel angle [rad].
 EVENT_TOL = 1e-12
@@ -47,7 +47,7 @@ def rk4(xi1: float, xi2: float, h: float, s: np.ndarray, gain: float,
     fd = 1.0 if xi2 > 0.0 else (-1.0 if xi2 < 0.0 else 0.0)
     q = s[L.S_Q]
     eta = s[L.S_ETA]
-    pa = s[L.S_PHI_A]
+    pa = contact_at_switch_on(eta, s[L.S_PHI_A], pv)
     t_on = s[L.S_ON_TIME]
     hh = 0.5 * h
     a1 = acceleration(xi1, xi2, q, eta, pa, gain, t_on, pv, fd)
@@ -99,7 +99,8 @@ def _locate(s: np.ndarray, gain: float, pv: np.ndarray, h_max: float, x1: float,
             df = v
         else:
             f = v
-            df = acceleration(x, v, s[L.S_Q], s[L.S_ETA], s[L.S_PHI_A], gain,
+            df = acceleration(x, v, s[L.S_Q], s[L.S_ETA],
+                              contact_at_switch_on(s[L.S_ETA], s[L.S_PHI_A], pv), gain,
                               s[L.S_ON_TIME] + hg, pv, 1.0 if v0 > 0.0 else -1.0)
         if which == 0 and abs(f) <= EVENT_TOL:
             return hg, x, v
@@ -145,7 +146,8 @@ def _latch(s: np.ndarray, pv: np.ndarray, n_a: float, phi_a: float, phi_d: float
     angles are kept as the wheel angles where that happens (the same with an exact sensor)."""
     n = unwrap_target(n_a, phi_a, angle_reading(s[L.S_XI1], pv))
     s[L.S_ETA] = n
-    s[L.S_THETA_ON] = angle_at_reading(n * SECTOR + phi_a, pv)
+    # (never behind the wheel: rounding in the inverse must not put a due switch-on in the past)
+    s[L.S_THETA_ON] = max(angle_at_reading(n * SECTOR + phi_a, pv), s[L.S_XI1])
     s[L.S_THETA_OFF] = angle_at_reading(n * SECTOR + phi_d, pv)
     s[L.S_PHI_A] = phi_a
     s[L.S_PHI_D] = phi_d

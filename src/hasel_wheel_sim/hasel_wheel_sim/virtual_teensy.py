@@ -32,7 +32,7 @@ from hasel_wheel_driver import protocol as P
 
 from . import layout as L
 from .integrator import advance
-from .model import SECTOR
+from .model import SECTOR, angle_reading
 from .plant import COUNT, Plant
 from .wheel import TICK
 
@@ -128,7 +128,8 @@ class Firmware:
         xi1 = s[L.S_XI1]
         q = int(s[L.S_Q])
         eta_u = int(s[L.S_ETA])
-        angle = sample.angle if sample is not None else xi1
+        # a lost sample (plant dropout): the firmware still reads its sensor
+        angle = sample.angle if sample is not None else angle_reading(xi1, self.plant.wheel.pv)
         return P.Telemetry(
             device_time_us=int(round(self.plant.t * 1e6)), sample_seq=self.sample_seq,
             encoder_raw=int(math.floor(angle / COUNT)) % 1024,

@@ -149,7 +149,7 @@ def test_the_model_gives_the_plant_its_dynamics_and_keeps_its_sensors():
 def test_a_plant_with_dynamic_effects_of_its_own_is_refused():
     realistic = PlantConfig(effects=effects_from_mapping(REALISTIC))
     with pytest.raises(ParameterError, match=r"plant.effects: \['charge_retention', 'com_offset', "
-                       r"'gain_spread', .*describe the wheel's dynamics.*disable them"):
+                       r"'gain_spread', .*describe the wheel \(its dynamics or its angle sensor\).*disable them"):
         plant_with_model(realistic, EXT)
     gains = PlantConfig(effects=effects_from_mapping({"actuator_gains": [1.0] * 16}))
     with pytest.raises(ParameterError, match=r"\['actuator_gains'\]"):

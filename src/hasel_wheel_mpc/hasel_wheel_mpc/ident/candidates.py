@@ -7,7 +7,7 @@ the very same physics (:mod:`hasel_wheel_sim.model`).  Parameters are chosen so 
 effect" is a parameter value (0, or equal gains) and the fit is smooth around it.
 
 ==================  =======================================================================
-identifier          physics (axle torque, or factor on the actuator force)
+identifier          physics (axle torque, factor on the actuator force, or the angle reading)
 ==================  =======================================================================
 viscous_drag        -c xi2                                   c [N*m*s/rad]
 com_offset          A cos(xi1) + B sin(xi1)                  A, B [N*m]  (once per turn)

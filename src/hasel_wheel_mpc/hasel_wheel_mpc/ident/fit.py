@@ -18,8 +18,9 @@ parameters, which directions are determined and which are not.
 
 Objective.  Each trial is cut into windows of ``window`` seconds; each window starts from its
 own (xi1, xi2), fitted along with the parameters (multiple shooting).  The residual is the
-simulated minus the measured angle [rad] at every sample, with the measured switching
-(:func:`~.simulate.shoot_windows`).  The window starts are solved for inside every evaluation
+simulated angle as the model's sensor reads it (:func:`~hasel_wheel_sim.model.angle_readings`;
+the angle itself unless an eccentricity is fitted) minus the recorded angle [rad] at every
+sample, with the measured switching (:func:`~.simulate.shoot_windows`).  The window starts are solved for inside every evaluation
 (variable projection: Gauss-Newton on all windows at once), so scipy's trust-region least
 squares sees only the shared parameters, with the window starts projected out of its
 Jacobian (Kaufman).  It runs to convergence (:data:`FTOL`), not to an iteration limit.

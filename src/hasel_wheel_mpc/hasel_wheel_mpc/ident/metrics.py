@@ -2,7 +2,8 @@
 
 Each trial is simulated from its first state to its end with **model switching**
 (:func:`~.simulate.free_run`): the recorded activations (pad, phi_a, phi_d) switch on and
-off where the *simulated* contact angle reaches their angles.  Nothing measured enters after
+off where the *simulated* contact angle, as the model's sensor reads it, reaches their
+angles.  Nothing measured enters after
 the first sample, so every error the model makes accumulates, as in the paper's Fig. 9.
 
 The speed is compared (the paper compares speed).  The measured speed is the trial's

@@ -40,7 +40,13 @@ Search (forward selection).  Starting from the nominal model:
      makes independent gains, so such a pattern is refused
      (:func:`~.candidates.spread_pattern`) and the structure is reported as unexplained.
      The test needs only the fit on all trials, so an implausible refit is refused before
-     its folds are fitted (the off-centre mass outside the library: 119.9 s instead of 153.2 s, bench_ident.py).
+     its folds are fitted (the off-centre mass outside the library: 119.9 s instead of 153.2 s, bench_ident.py);
+   * **the same in every trial**: refitted on each trial alone (with force law and friction), the
+     effect's size must not trend with the trials' speed (:mod:`.consistency`): an
+     off-centre mass standing in for an angle sensor's reading error grows as about
+     speed^2, a reading error standing in for an off-centre mass falls as speed^-3.
+     Checked on the fit on all trials of every refit, so a stand-in is refused before its
+     folds, and is not "backed" (no second start, no pair).
 
    A refit whose simulation error on the very trials it was fitted to does not fall below
    the current model's is refused before its folds too: it cannot cut that error on trials
@@ -494,9 +500,10 @@ def judge(ev: Evaluation, added: tuple[Candidate, ...], current: Evaluation, min
     if math.isnan(ev.heldout_rmse):           # not cross-validated (never accepted)
         fitted = pooled_rmse(ev.sim_fitted)
         before = pooled_rmse(current.sim_fitted)
-        why = odd or (f"the simulation error on the trials it was fitted to did not "
-                      f"fall ({fitted:.4f} rad/s against {before:.4f})"
-                      if fitted >= before else "it does not fit the windows better")
+        gate = (f"the simulation error on the trials it was fitted to did not fall "
+                f"({fitted:.4f} rad/s against {before:.4f})" if fitted >= before else
+                "it does not fit the windows better" if ev.fit.rmse > current.fit.rmse else None)
+        why = "; ".join(w for w in (gate, odd) if w) or "not cross-validated"
         ev.reason = (f"window RMSE {1e3 * ev.fit.rmse:.3f} mrad vs "
                      f"{1e3 * current.fit.rmse:.3f} on all trials; simulation error "
                      f"{fitted:.4f} vs {before:.4f} rad/s on all trials; Wald p = "
@@ -556,19 +563,21 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         reference.pop("tau_f", None)
     restarted = False
     refused: dict[bytes, str | None] = {}
-    stand_ins: dict[str, str] = {}      # candidate -> why it was refused as a stand-in
+    stand_ins: dict[str, tuple[Candidate, str]] = {}    # id -> (candidate, why a stand-in)
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
         """Why the values of ``added`` in the fit ``f`` cannot be the effect they name:
         implausible values, or a size that trends with the trials' speed (once per fit)."""
-        key = f.z.tobytes() + "+".join(c.id for c in effects).encode()
+        key = f.z.tobytes() + ("+".join(c.id for c in effects) + "|"
+                               + "+".join(c.id for c in added)).encode()
         if key not in refused:
             why = implausibility(f, added)
             if why is None:
-                why = stand_in(trials, base, effects, f, added, window, threads)
-                if why is not None:
-                    stand_ins[why.split(" ", 1)[0]] = why
+                found = stand_in(trials, base, effects, f, added, window, threads)
+                if found is not None:
+                    why = found[1]
+                    stand_ins[found[0].id] = found
             refused[key] = why
         return refused[key]
 
@@ -734,8 +743,10 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # a library effect of the same shape that was refused as a stand-in tells how the
         # structure goes with speed, which the signature alone does not
         for sig in sigs:
-            for cid, why in stand_ins.items():
-                if BY_ID[cid].axis == sig.axis and BY_ID[cid] not in chosen:
+            for c, why in stand_ins.values():
+                # the library's periodic effects are once per turn (lap) of their axis
+                if (c.axis == sig.axis and c not in chosen and sig.period is not None
+                        and abs(sig.period / (2 * math.pi) - 1.0) < 0.02):
                     sig.text += f"; refitted to it, {why}"
     return ident
 

@@ -24,13 +24,17 @@ import numpy as np
 
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.jit import jit, jit_inline, jit_kernel
-from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, acceleration, angle_reading
+from hasel_wheel_sim.model import (N_ACTUATORS, SECTOR, acceleration, angle_reading,
+                                   contact_at_switch_on)
 
 
 @jit_inline
 def _rk4(x1: float, x2: float, h: float, q: float, eta: float, phi_a: float, gain: float,
          on_time: float, pv: np.ndarray) -> tuple[float, float]:
-    """One RK4 step of (xi1, xi2) over h [s] with the actuator input held."""
+    """One RK4 step of (xi1, xi2) over h [s] with the actuator input held; phi_a [rad] is the
+    commanded (read) activation angle, turned into the true one the force law needs."""
+    if q != 0.0:
+        phi_a = contact_at_switch_on(eta, phi_a, pv)
     k1a = x2
     k1b = acceleration(x1, x2, q, eta, phi_a, gain, on_time, pv, 0.0)
     k2a = x2 + 0.5 * h * k1b
