@@ -17,7 +17,8 @@ For each effect, switched on alone in the plant and never declared to the tool, 
 Then two effects that the nominal fit absorbs by bending its force law far (3 x 34 s, plant
 seed 7): a weak off-centre mass and a 120 ms rise lag.  Then a rise lag plus viscous drag
 named together, and viscous drag outside the library reported as a residual that is not
-white (3 x 34 s, plant seeds 11 and 12).  Then a gain spread whose fit ends in a poorer optimum (the check that an effect's gain is its own,
+white (3 x 34 s, plant seeds 11 and 12).  Then an angle sensor off the axle, at 5 and 20 mrad,
+with the whole library and with its candidate left out (3 x 34 s, plant seed 11).  Then a gain spread whose fit ends in a poorer optimum (the check that an effect's gain is its own,
 select.optimum_not_effect).  Then every effect of the realistic plant at once (up to four chosen; REALISTIC in
 hasel_wheel_sim.effects, with the link effects), as a real wheel would have them.
 Then the closed loop on a COM plant: tracking RMSE with the nominal and with the true model in
@@ -132,13 +133,13 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str,
           f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
 
 
-def _identify_short(effects: dict, seed: int):
+def _identify_short(effects: dict, seed: int, library=C.LIBRARY, analyse: bool = False):
     """(trials, identification, wall time [s], the refits in words) for ``effects`` on
-    3 x 34 s, without the residual analysis."""
+    3 x 34 s with the candidates of ``library``, with the residual analysis if ``analyse``."""
     trials = S.record_set(SHORT, config=PlantConfig(
         seed=seed, switching="tick", effects=effects_from_mapping({**ENCODER, **effects})))
     t0 = time.perf_counter()
-    res = SEL.identify(trials, k_folds=3, analyse_residuals=False)
+    res = SEL.identify(trials, k_folds=3, library=library, analyse_residuals=analyse)
     dt = time.perf_counter() - t0
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
                        f"({e.reason.split(';')[0]})" for r in res.rounds for e in r)
@@ -192,6 +193,37 @@ def run_two_and_outside() -> None:
               f" mean autocorrelation over 0.2 s {d.correlated_share:.4f} (white sd "
               f"{d.correlated_share_sd:.4f}); lags outside the 99 % band "
               f"{100 * d.whiteness_outside:.0f} %; unexplained: {sigs}; {dt:.0f} s")
+
+
+def run_sensor() -> None:
+    """An angle sensor off the axle (reads xi1 + e sin(xi1 + 0.3)), 3 x 34 s, plant seed 11:
+    at 5 and 20 mrad with the whole library (named, against the truth and the true model's
+    error), and with its candidate left out (the off-centre mass refused as a stand-in,
+    ident/consistency.py; the signature)."""
+    for amp in (0.005, 0.02):
+        ecc = {"angle_eccentricity": {"enabled": True, "amplitude": {"value": amp, "unit": "rad"},
+                                      "phase": {"value": 0.3, "unit": "rad"}}}
+        trials, res, dt, refits = _identify_short(ecc, seed=11)
+        got = ""
+        if "angle_eccentricity" in res.chosen:
+            v = res.final.fit.values
+            d = C.BY_ID["angle_eccentricity"].describe([v["E"], v["F"]])
+            got = (f"amplitude {1e3 * d['amplitude_rad']:.2f} mrad (true {1e3 * amp:.0f}), "
+                   f"phase {d['phase_rad']:.3f} rad (true 0.3); ")
+        floor = true_model_error(trials, "angle_eccentricity",
+                                 {"E": amp * math.sin(0.3), "F": amp * math.cos(0.3)})
+        print(f"sensor eccentricity {1e3 * amp:.0f} mrad, 3 x 34 s, plant seed 11: chosen "
+              f"{res.chosen}; {got}held-out simulation error {res.nominal.sim_heldout_rmse:.4f}"
+              f" -> {res.final.sim_heldout_rmse:.4f} rad/s (true model {floor:.4f}); "
+              f"refits: {refits}; {dt:.0f} s")
+        trials, res, dt, refits = _identify_short(
+            ecc, seed=11, library=C.library(exclude=["angle_eccentricity"]), analyse=True)
+        stand = [e.reason[e.reason.find("size ~"):].split(";")[0] for r in res.rounds
+                 for e in r if "not the same in every trial" in e.reason]
+        sigs = " | ".join(sig.text.split("; refitted to it")[0]
+                          for sig in res.diagnostics_after.signatures)
+        print(f"  its candidate left out: chosen {res.chosen or 'none'}; refused as stand-ins: "
+              f"{' / '.join(stand) or 'none'}; unexplained: {sigs or 'none'}; {dt:.0f} s")
 
 
 def run_restarted() -> None:
@@ -252,6 +284,7 @@ def main() -> None:
         for label, (effect, cid, truth) in BENT.items():
             run(label, effect, cid, truth, SHORT, "3 x 34 s, plant seed 7", seed=7)
         run_two_and_outside()
+        run_sensor()
         run_restarted()
         run_realistic()
     closed_loop_on_com()

@@ -54,7 +54,7 @@ def test_no_trend_is_formed_without_a_size_or_a_speed_range():
 def test_an_effect_is_inconsistent_only_if_its_trend_is_both_significant_and_steep(p, k,
                                                                                    expected):
     c = K.Consistency("com_offset", ["A", "B"], ["t"], np.zeros((1, 2)), np.zeros((1, 2)),
-                      np.zeros(2), 0.0, 2, 1.0, 0.0, [1.0], k, 0.1, p)
+                      np.zeros(2), 0.0, 2, 1.0, [1.0], k, 0.1, p)
     assert K.inconsistent(c) is expected
     assert not K.inconsistent(None)
 

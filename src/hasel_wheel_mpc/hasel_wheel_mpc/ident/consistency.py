@@ -30,7 +30,7 @@ when the slope is significant (two-sided p < :data:`TREND_P`) and |k| > :data:`E
 Ad hoc, 3 x 34 s, plant seeds 11-16 (README): the right models of seven effects gave
 |k| <= 0.85 with p >= 0.015; an off-centre mass on reading-error data k = +1.82 to +2.13, a
 reading error on off-centre-mass data -2.69 to -3.66, all with p <= 5e-7.
-The homogeneity chi^2 of the u_j about ubar and their spread are reported beside it.
+The homogeneity chi^2 of the u_j about ubar is reported beside it.
 """
 from __future__ import annotations
 
@@ -64,11 +64,12 @@ EXPONENT = 0.5
 class Consistency:
     """An effect refitted trial by trial.
 
-    ``names`` (k,) the parameters refitted, ``estimates`` (m, k) their values per trial, ``sd`` (m, k) their standard deviations,
-    ``pooled`` (k,) the inverse-covariance mean; ``chi2`` on ``dof`` degrees of freedom and its
-    ``p``; ``spread`` [1] the RMS distance of the trials' estimates from the pooled one over
-    the pooled one's norm; ``speeds`` [rad/s] each trial's mean measured speed while driven;
-    ``exponent`` k (size ~ speed^k) with its standard deviation and the slope's ``trend_p``."""
+    ``effect`` its id; ``names`` (k,) the parameters refitted; ``trials`` (m,) the trials'
+    names; ``estimates`` (m, k) the parameters per trial and ``sd`` (m, k) their standard
+    deviations, each in its own unit; ``pooled`` (k,) their inverse-covariance mean; ``chi2``
+    on ``dof`` degrees of freedom about one value, and its ``p``; ``speeds`` (m,) [rad/s]
+    each trial's mean measured speed while driven; ``exponent`` k (size ~ speed^k) with its
+    standard deviation ``exponent_sd`` and the two-sided ``trend_p`` of the slope."""
 
     effect: str
     names: list[str]
@@ -79,7 +80,6 @@ class Consistency:
     chi2: float
     dof: int
     p: float
-    spread: float
     speeds: list[float]
     exponent: float
     exponent_sd: float
@@ -150,13 +150,10 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
                                                             axis=0)
     chi2 = float(sum((v - pooled) @ i @ (v - pooled) for i, v in zip(infos, u)))
     dof = (len(trials) - 1) * k
-    norm = float(np.linalg.norm(pooled))
     exponent, exponent_sd, trend_p = _trend(u, covs, pooled, speeds)
-    spread = (math.sqrt(float(np.mean(np.sum((u - pooled) ** 2, axis=1)))) / norm
-              if norm > 0 else math.inf)
     return Consistency(effect.id, [p.name for p in params], [tr.name for tr in trials], x,
                        np.array(sd), pooled * scale, chi2, dof, float(stats.chi2.sf(chi2, dof)),
-                       spread, speeds, exponent, exponent_sd, trend_p)
+                       speeds, exponent, exponent_sd, trend_p)
 
 
 def _trend(u: np.ndarray, covs: list[np.ndarray], pooled: np.ndarray,
