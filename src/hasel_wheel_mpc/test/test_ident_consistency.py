@@ -104,3 +104,60 @@ def test_a_reading_error_standing_in_for_an_off_centre_mass_falls_with_speed():
     c = _consistency(COM, "angle_eccentricity")
     assert K.inconsistent(c)
     assert -4.0 < c.exponent < -0.5 and c.trend_p < 1e-4
+
+
+def test_the_drift_within_trials_is_the_weighted_mean_of_each_trials_log_ratio():
+    # halves (a_j, b_j) at HV times (h0_j, h1_j), whole-trial size m_j: each trial gives
+    # h_j = (b - a) / (m ln(h1 / h0)) with variance (va + vb) / (m ln(h1 / h0))^2
+    halves = np.array([[1.0, 1.2], [2.0, 2.5], [0.5, 0.52]])
+    var = np.array([[0.01, 0.02], [0.04, 0.04], [0.001, 0.002]])
+    hv = np.array([[0.3, 0.9], [0.2, 0.8], [0.4, 1.0]])
+    whole = np.array([1.1, 2.2, 0.51])
+    g = whole * np.log(hv[:, 1] / hv[:, 0])
+    hj = (halves[:, 1] - halves[:, 0]) / g
+    w = g ** 2 / var.sum(axis=1)
+    h, sd, p = K._drift(halves, var, hv, whole)
+    assert h == pytest.approx(np.sum(w * hj) / np.sum(w), rel=1e-12)
+    assert sd == pytest.approx(1 / math.sqrt(np.sum(w)), rel=1e-12)
+    assert p == pytest.approx(2 * stats.norm.sf(abs(h) / sd), rel=1e-9)
+    # a trial without a cut (nan), a size that is not positive, or an infinite variance
+    # has no weight; with none left there is no drift
+    halves2 = np.vstack([halves, [[np.nan, np.nan], [3.0, 9.0], [1.0, 5.0]]])
+    var2 = np.vstack([var, [[np.inf, np.inf], [0.01, 0.01], [np.inf, 0.01]]])
+    hv2 = np.vstack([hv, [[np.nan, np.nan], [0.3, 0.9], [0.3, 0.9]]])
+    assert K._drift(halves2, var2, hv2, np.append(whole, [1.0, -1.0, 1.0])) == \
+        pytest.approx((h, sd, p), rel=1e-12)
+    assert K._drift(halves[:, :], var, hv, -whole) == (0.0, math.inf, 1.0)
+
+
+@pytest.mark.parametrize("p, h, expected", [(1e-4, 0.09, True), (1e-4, -0.09, True),
+                                            (1e-4, 0.03, False), (0.01, 0.09, False)])
+def test_an_effect_that_drifts_within_the_trials_is_inconsistent(p, h, expected):
+    c = K.Consistency("rise_lag", ["tau"], ["t"], np.zeros((1, 1)), np.zeros((1, 1)),
+                      np.zeros(1), 0.0, 2, 1.0, [1.0], 0.0, 0.1, 1.0, drift=h, drift_sd=0.01,
+                      drift_p=p)
+    assert K.drifts(c) is expected and K.inconsistent(c) is expected
+    assert not K.trends_with_speed(c)
+
+
+RETENTION = {"charge_retention": {"enabled": True, "rate": {"value": 0.2, "unit": "1/s"},
+                                  "recovery": {"value": 300.0, "unit": "s"}}}
+RISE = {"rise_lag": {"enabled": True, "time_constant": {"value": 0.04, "unit": "s"}}}
+
+
+@pytest.mark.parametrize("effects, cid", [(RETENTION, "charge_retention"), (RISE, "rise_lag")])
+def test_the_right_effect_is_the_same_in_both_halves_of_every_drive(effects, cid):
+    c = _consistency(effects, cid, seed=11)
+    # the halves are cut at the middle of the drive: the HV time of the second is about
+    # three times the first's (a linear accumulation from 0: mean 1/4 against 3/4 of the end)
+    assert np.all(c.hv[:, 1] > 2.0 * c.hv[:, 0]) and np.all(c.hv[:, 1] < 4.0 * c.hv[:, 0])
+    assert abs(c.drift) < 3 * c.drift_sd + 0.02 and not K.inconsistent(c)
+
+
+def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():
+    # retention takes force away as the actuators hold HV: a slower rise, fitted to it, must
+    # be slower in the second half of each drive than in the first
+    c = _consistency(RETENTION, "rise_lag", seed=11)
+    assert np.all(c.halves[:, 1] > c.halves[:, 0])
+    assert c.drift > K.DRIFT and c.drift_p < 1e-6 and K.inconsistent(c)
+    assert "first to the second half" in c.drift_text()

@@ -225,3 +225,18 @@ def test_coastdown_friction_matches_the_closed_form():
         assert est.segments == 2
         assert est.tau_f == pytest.approx(base.tau_f, rel=tol)
         assert est.ci95[0] <= base.tau_f * (1 + tol) and est.ci95[1] >= base.tau_f * (1 - tol)
+
+
+def test_hv_time_counts_each_actuators_own_on_time():
+    # 0.1 s steps, a pattern of 10 samples three times: pad 0 on for 3 samples, pad 1 for 2,
+    # pad 0 again for 2; per pattern pad 0 gains 0.5 s and pad 1 0.2 s of HV time
+    t = np.arange(30) * 0.1
+    q = np.tile([1, 1, 1, 0, 1, 1, 0, 1, 1, 0], 3)
+    pad = np.tile([0, 0, 0, 0, 1, 1, 1, 0, 0, 0], 3)
+    tr = D.Trial("x", t, np.arange(30) * 0.01, q, pad, np.zeros(30, dtype=int),
+                 np.zeros(30), np.full(30, 0.3))
+    # the on-time before each sample of the actuator of interest, its own clock only
+    first = np.array([0.0, 0.1, 0.2, 0.3, 0.0, 0.1, 0.2, 0.3, 0.4, 0.5])
+    gained = np.where(pad[:10] == 0, 0.5, 0.2)
+    expected = np.concatenate([first + k * gained for k in range(3)])
+    assert D.hv_time(tr) == pytest.approx(expected, abs=1e-12)

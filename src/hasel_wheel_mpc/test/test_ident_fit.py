@@ -8,7 +8,9 @@ import pytest
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import identifiability as I
 from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.model import param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import PlantConfig
 
@@ -98,3 +100,25 @@ def test_the_braking_gain_is_fitted_when_the_data_brakes():
     assert "brake_gain" in prob.names
     res = prob.fit(start={"tau_f": TRUE.tau_f})
     assert res.values["brake_gain"] == pytest.approx(TRUE.brake_gain, rel=0.05)
+
+
+def test_a_kept_span_weighs_only_its_samples_and_keeps_the_history_before_it(nominal_trials):
+    tr = nominal_trials[0]
+    everything = F.Problem([tr], TRUE)
+    span = (10.0, 20.0)
+    kept = F.Problem([tr], TRUE, keep=span)
+    inside = (kept.t >= span[0]) & (kept.t < span[1])
+    assert np.array_equal(kept.ok, everything.ok & inside)
+    assert kept.window == everything.window and np.array_equal(kept.starts, everything.starts)
+    # the retained charge runs from the trial's start, not from the span's: the gains of a
+    # retention model are the same sample for sample
+    pv = param_vector(TRUE)
+    pv[L.P_RET_RATE], pv[L.P_RET_RECOVERY] = 0.2, 300.0
+    assert np.array_equal(kept.gains(pv), everything.gains(pv))
+    assert np.any(kept.gains(pv)[inside] < 0.99)
+    # outside the span the residual is 0, inside it is the whole problem's
+    z = np.concatenate([[F.force_coordinates(TRUE)[k] for k in ("peak", "centre", "width", "b")],
+                        [TRUE.tau_f], everything.initial_starts().ravel()])
+    r_all, r_kept = everything.residual(z).copy(), kept.residual(z).copy()
+    assert np.all(r_kept[~inside] == 0.0)
+    assert np.array_equal(r_kept[inside], r_all[inside])

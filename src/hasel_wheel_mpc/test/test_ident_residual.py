@@ -78,3 +78,85 @@ def test_a_constant_acceleration_error_per_window_is_sized_from_the_correlation(
 def test_correlated_share_needs_lags():
     with pytest.raises(ValueError, match="acf needs lags 0..L with L >= 1"):
         R.correlated_share(np.ones(1), 100)
+
+
+@pytest.fixture(scope="module")
+def windows():
+    """A problem on three clean plant trials (3 x 34 s), its windows as the defects see
+    them (all but each trial's last), and the trend axes from the data."""
+    from hasel_wheel_mpc.ident import synthetic as S
+    from hasel_wheel_mpc.ident.data import hv_time
+    from hasel_wheel_mpc.ident.fit import Problem
+    prob = Problem(S.encoder_trials({}, seed=5))
+    wins = np.array([w for w in range(prob.n_windows - 1)
+                     if prob.window_trial[w] == prob.window_trial[w + 1]])
+    hv = np.concatenate([hv_time(tr) for tr in prob.trials])
+    axes = {"time": np.concatenate([tr.t - tr.t[0] for tr in prob.trials]),
+            "hv_time": np.where(prob.q > 0, hv, np.nan),
+            "speed": np.gradient(prob.y, prob.t)}
+    return prob, wins, prob.window_trial[wins], axes
+
+
+def _window_mean(prob, wins, v):
+    ok = np.isfinite(v)
+    num = np.add.reduceat(np.where(ok, v, 0.0), prob.starts[:-1])[wins]
+    cnt = np.add.reduceat(ok.astype(float), prob.starts[:-1])[wins]
+    return np.where(cnt > 0, num / np.maximum(cnt, 1.0), np.nan)   # nan: never on
+
+
+def test_a_drift_with_hv_time_is_found_with_its_slope_and_white_defects_give_none(windows):
+    prob, wins, trial_of, axes = windows
+    rng = np.random.default_rng(1)
+    driven = R.driven_windows(prob, wins)
+    assert 0.6 < driven.mean() < 0.9          # 25 s driven and 9 s coasting per trial
+    hv = np.nan_to_num(_window_mean(prob, wins, axes["hv_time"]))
+    level = np.array([0.01, -0.02, 0.005])[trial_of]
+    slope, noise = -0.03, 0.002                 # [rad/s^2 per s], [rad/s^2]
+    a = level + np.where(driven, slope * hv, 0.0) + noise * rng.standard_normal(wins.size)
+    tr = R.drive_trend(prob, axes, a, wins, trial_of)
+    assert tr is not None and tr.axis == "hv_time" and tr.unit == "s"
+    # least squares with one level per trial: the slope within a few of its standard errors
+    x = hv[driven]
+    xc = x - np.array([x[trial_of[driven] == j].mean() for j in trial_of[driven]])
+    assert tr.slope == pytest.approx(slope, abs=4 * noise / math.sqrt(xc @ xc))
+    assert tr.p_value < 1e-10 and tr.p_values["speed"] > tr.p_value
+    assert tr.amplitude == pytest.approx(0.5 * abs(tr.slope) * np.ptp(x), rel=1e-9)
+    # time since the start rises with the HV time in these trials: said, not hidden
+    assert tr.correlations["time"] > 0.9
+    sig = R.trend_signature(tr, 0.0357)
+    assert sig.period is None and sig.axis == "hv_time" and "falls" in sig.text
+    assert "cannot tell" in sig.text
+    assert R.drive_trend(prob, axes, level + noise * rng.standard_normal(wins.size), wins,
+                         trial_of) is None
+
+
+def test_a_slow_drift_is_not_taken_for_a_period_but_a_real_one_is_found(windows):
+    prob, wins, trial_of, axes = windows
+    rng = np.random.default_rng(2)
+    t = _window_mean(prob, wins, axes["time"])
+    driven = R.driven_windows(prob, wins)
+    drive = np.array([t[(trial_of == j) & driven].max() for j in range(3)])[trial_of]
+    # a drift that bends where the wheel spins up and falls through the drive, then a step
+    # at the coast: the shape charge retention leaves in a nominal fit
+    u = t / drive
+    drift = np.where(driven, 0.03 * np.sin(1.3 * math.pi * u) - 0.02 * u, 0.001)
+    a = drift + 0.002 * rng.standard_normal(wins.size)
+    duration = max(tr.duration for tr in prob.trials)
+    freqs = np.arange(R.MIN_CYCLES / duration, 0.45, 1 / (4 * duration))
+    D = R.scan_nuisance(prob, axes["time"], wins, trial_of)
+    _, p = R._defect_scan(prob, axes["time"], a, wins, D, freqs)
+    assert p.min() > R.SIGNIFICANCE
+    # one level per trial and the scan from 1.5 cycles, as before: the drift reads as a
+    # period of about one cycle per trial
+    levels = (trial_of[:, None] == np.arange(3)[None, :]).astype(float)
+    slow = np.arange(1.5 / duration, 0.45, 1 / (4 * duration))
+    _, p_old = R._defect_scan(prob, axes["time"], a, wins, levels, slow)
+    assert p_old.min() < R.SIGNIFICANCE and 1 / slow[np.argmin(p_old)] > duration / 3
+    # a real periodic torque of period 5 s on top is found, at its size
+    f0 = 0.2
+    ripple = 0.01 * np.add.reduceat(np.sin(2 * math.pi * f0 * axes["time"]),
+                                    prob.starts[:-1])[wins] / np.diff(prob.starts)[wins]
+    amp, p2 = R._defect_scan(prob, axes["time"], a + ripple, wins, D, freqs)
+    i = int(np.argmin(p2))
+    assert p2[i] < R.SIGNIFICANCE and abs(freqs[i] - f0) <= 1 / (4 * duration)
+    assert amp[i] == pytest.approx(0.01, rel=0.15)

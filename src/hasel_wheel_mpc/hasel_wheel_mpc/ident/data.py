@@ -111,6 +111,20 @@ class Trial:
                      None if self.speed is None else self.speed[a:b], self.source)
 
 
+def hv_time(tr: Trial) -> np.ndarray:
+    """(n,) accumulated HV on-time [s] of the actuator of interest at each sample, counted
+    from the trial's start (the time each actuator has held HV so far)."""
+    pad = tr.eta_unwrapped % N_ACTUATORS
+    acc = np.zeros(N_ACTUATORS)
+    out = np.zeros(tr.t.shape[0])
+    dt = np.diff(tr.t, append=tr.t[-1])
+    for k in range(tr.t.shape[0]):
+        out[k] = acc[pad[k]]
+        if tr.q[k]:
+            acc[pad[k]] += dt[k]
+    return out
+
+
 def clean_mask(t: np.ndarray, y: np.ndarray, tol: float = GLITCH,
                modulo: float | None = None) -> np.ndarray:
     """False at isolated glitches: samples off the line through both neighbours by > tol [rad].

@@ -170,7 +170,10 @@ class Problem:
     """Multiple-shooting least squares over a set of trials (see the module docstring).
 
     ``candidates`` extend the nominal model; ``fixed`` pins shared parameters by name
-    (e.g. tau_f from the coast-downs).  Arrays of all trials are concatenated; windows never
+    (e.g. tau_f from the coast-downs).  ``keep`` (t0, t1) [s], in each trial's own clock,
+    counts only the samples with t0 <= t < t1 in the residual: the rest are still simulated,
+    so that states such as the retained charge run on from the trial's start, but carry no
+    weight (a window without a counted sample has undetermined starts, which stay put).  Arrays of all trials are concatenated; windows never
     cross a trial boundary.  ``threads`` > 1 splits every simulation's windows over that many
     threads (the same numbers bit for bit).  An instance is not thread-safe: its simulations
     share output arrays, so give each thread its own.
@@ -179,7 +182,7 @@ class Problem:
     def __init__(self, trials: list[Trial], base: WheelParams | None = None,
                  candidates: tuple[Candidate, ...] = (), window: float = 1.0,
                  fixed: dict[str, float] | None = None, quantised: bool = True,
-                 threads: int = 1) -> None:
+                 threads: int = 1, keep: tuple[float, float] | None = None) -> None:
         if not trials:
             raise ValueError("identification needs at least one trial")
         self.trials = [at_rest_trimmed(t) for t in trials]
@@ -193,6 +196,7 @@ class Problem:
         self.window = window
         self.quantised = quantised
         self.threads = max(int(threads), 1)
+        self.keep = keep
         self._concat()
 
     # -- layout -------------------------------------------------------------------------------
@@ -212,7 +216,10 @@ class Problem:
             es.append(tr.eta_unwrapped.astype(float))
             pas.append(np.where(tr.q == 1, np.nan_to_num(tr.phi_a), 0.0))
             ots.append(on_time)
-            oks.append(clean_mask(tr.t, tr.angle))
+            ok = clean_mask(tr.t, tr.angle)
+            if self.keep is not None:
+                ok &= (tr.t >= self.keep[0]) & (tr.t < self.keep[1])
+            oks.append(ok)
             w0 = len(starts)
             k = 0
             while k < m - 1:
@@ -342,7 +349,7 @@ class Problem:
         for w in range(self.n_windows):
             a, e = self.starts[w], self.starts[w + 1]
             b = max(min(a + int(np.searchsorted(self.t[a:e], self.t[a] + 0.1)), e), a + 2)
-            ok = self.ok[a:b]
+            ok = self.ok[a:b] if self.ok[a:b].sum() >= 2 else np.ones(b - a, dtype=bool)
             p = np.polyfit(self.t[a:b][ok] - self.t[a], self.y[a:b][ok], 1)
             x0[w] = (p[1], max(p[0], 0.0))
         return x0

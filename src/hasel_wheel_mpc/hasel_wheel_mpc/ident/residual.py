@@ -29,12 +29,23 @@ from scipy import signal, stats
 
 from hasel_wheel_sim.model import N_ACTUATORS, SECTOR
 
+from .data import hv_time
 from .fit import FitResult, Problem
 
 SG_WINDOW = 61          # samples (0.2 s at 300 Hz) of the Savitzky-Golay derivative
 SIGNIFICANCE = 1e-6     # p-value below which structure counts (many axes and frequencies)
 MIN_AMPLITUDE = 0.005   # [rad/s^2] structure smaller than this is not reported
 MIN_WINDOW_GAIN = 0.2   # a sinusoid that the window means shrink below this is not scanned
+#: Axes along which a steady change of the window defects during the drive is looked for
+#: (:func:`drive_trend`), and the p-value below which one counts (three tests, not a scan).
+TREND_AXES = ("time", "hv_time", "speed")
+TREND_SIGNIFICANCE = 1e-4
+#: The periodograms' longest period: the longest trial's span (in time, in wheel angle) over
+#: this many cycles.  Fewer cycles than this are a drift's shape, not a period (see
+#: :func:`scan_nuisance`).
+MIN_CYCLES = 3.0
+#: A window counts as driven when an actuator is on for at least this share of its samples.
+DRIVEN_SHARE = 0.2
 #: mean autocorrelation of the angle residual over lags 1..max_lag above which the residual
 #: counts as not white when no axis shows structure (see :func:`signatures`)
 CORRELATED_SHARE = 0.01
@@ -96,6 +107,24 @@ class Signature:
 
 
 @dataclass
+class Trend:
+    """A steady change of the unmodelled acceleration during the drive (:func:`drive_trend`).
+
+    ``axis`` the axis it follows best (``unit`` its unit); ``slope`` [rad/s^2 per unit];
+    ``amplitude`` [rad/s^2] half its change over the axis' range in the driven windows;
+    ``p_value`` of "no slope"; ``p_values`` that of every axis of :data:`TREND_AXES`;
+    ``correlations`` the correlation within trials of the other axes with ``axis`` [1]."""
+
+    axis: str
+    unit: str
+    slope: float
+    amplitude: float
+    p_value: float
+    p_values: dict[str, float]
+    correlations: dict[str, float]
+
+
+@dataclass
 class Diagnostics:
     rms_angle: float                      # [rad]
     rms_accel: float                      # [rad/s^2]
@@ -121,6 +150,7 @@ class Diagnostics:
     axes: dict[str, np.ndarray] = field(default_factory=dict)
     mask: np.ndarray | None = None
     defects: np.ndarray | None = None     # window continuity defects [rad/s^2]
+    trend: Trend | None = None            # a significant steady change during the drive
 
 
 def acceleration_residual(problem: Problem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -142,8 +172,7 @@ def axis_values(problem: Problem, x1: np.ndarray, x2: np.ndarray) -> dict[str, n
     """Each axis at every sample (nan where it does not apply)."""
     on = problem.q > 0
     t_rel = np.concatenate([tr.t - tr.t[0] for tr in problem.trials])
-    hv = np.concatenate([_cumulative_on(tr.t, tr.q, tr.eta_unwrapped % N_ACTUATORS)
-                         for tr in problem.trials])
+    hv = np.concatenate([hv_time(tr) for tr in problem.trials])
     ratio = problem.base.r / problem.base.L
     return {
         "wheel_angle": np.mod(x1, 2 * math.pi),
@@ -155,18 +184,6 @@ def axis_values(problem: Problem, x1: np.ndarray, x2: np.ndarray) -> dict[str, n
         "speed": x2.copy(),
         "on_time": np.where(on, problem.on_time, np.nan),
     }
-
-
-def _cumulative_on(t: np.ndarray, q: np.ndarray, pad: np.ndarray) -> np.ndarray:
-    """Accumulated HV on-time [s] of the active actuator at each sample."""
-    acc = np.zeros(N_ACTUATORS)
-    out = np.zeros(t.shape[0])
-    dt = np.diff(t, append=t[-1])
-    for k in range(t.shape[0]):
-        out[k] = acc[pad[k]]
-        if q[k]:
-            acc[pad[k]] += dt[k]
-    return out
 
 
 def correlation(x: np.ndarray, y: np.ndarray, max_lag: int) -> np.ndarray:
@@ -273,17 +290,46 @@ def window_defects(problem: Problem, z: np.ndarray, x2: np.ndarray
     return a, wins, problem.window_trial[wins] if wins.size else wins
 
 
+def scan_nuisance(problem: Problem, t_rel: np.ndarray, wins: np.ndarray,
+                  trial_of: np.ndarray) -> np.ndarray:
+    """(m, k) what the periodograms fit besides a sinusoid, for the window defects of windows
+    ``wins`` (m,) in trials ``trial_of``: each trial's coast its own level, each trial's
+    drive a quadratic in time (``t_rel`` (n,) [s] since the trial's start, window means).
+
+    An effect that grows or fades during the drive leaves a defect that drifts through it,
+    with a bend where the wheel spins up, and the force law's mean misfit shows only while
+    driven, as a step at the coast.  With one level per trial, a periodogram takes such a
+    drift for a sinusoid of about one cycle per trial (seen with charge retention of 0.2/s
+    left out: "periodic in time with period 22.6 s" and "in wheel angle with period 60.8
+    rad", 3 x 34 s, seed 11, ad hoc).  A slow drift is a trend (:func:`drive_trend`), not a
+    period; a quadratic takes up its shape and leaves the sinusoids of two cycles or more."""
+    st = problem.starts
+    lengths = np.diff(st)[wins].astype(float)
+    t = np.add.reduceat(t_rel, st[:-1])[wins] / lengths
+    driven = driven_windows(problem, wins)
+    cols = []
+    for j in np.unique(trial_of):
+        for regime, powers in ((False, (0,)), (True, (0, 1, 2))):
+            m = (trial_of == j) & (driven == regime)
+            if not m.any():
+                continue
+            u = (t - t[m].mean()) / max(float(np.ptp(t[m])), 1e-9)
+            for k in powers:
+                if m.sum() > k:
+                    cols.append(np.where(m, u ** k, 0.0))
+    return np.column_stack(cols)
+
+
 def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarray,
-                 trial_of: np.ndarray, freqs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 D: np.ndarray, freqs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Amplitude [rad/s^2] and p-value of a sinusoid along ``x`` (n,) in the defects ``a``.
 
     Each defect is a window mean, so the regressors are the window means of cos and sin of
-    2 pi f x (the averaging over a window is then modelled exactly, not ignored); each trial
-    has its own intercept.  F test of the sinusoid against the intercepts alone."""
+    2 pi f x (the averaging over a window is then modelled exactly, not ignored), fitted
+    together with the nuisance columns D (m, k) (:func:`scan_nuisance`).  F test of the
+    sinusoid against the nuisance alone."""
     st = problem.starts
     lengths = np.diff(st)[wins].astype(float)
-    trials = np.unique(trial_of)
-    D = (trial_of[:, None] == trials[None, :]).astype(float)
     base_coef, *_ = np.linalg.lstsq(D, a, rcond=None)
     rss0 = float(np.sum((a - D @ base_coef) ** 2))
     n, k = a.size, D.shape[1] + 2
@@ -303,6 +349,77 @@ def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarra
             F = ((rss0 - rss) / 2) / (rss / (n - k))
             p[i] = float(stats.f.sf(F, 2, n - k))
     return amp, p
+
+
+def driven_windows(problem: Problem, wins: np.ndarray) -> np.ndarray:
+    """(m,) bool: which of the windows ``wins`` (m,) are driven, an actuator on for at least
+    :data:`DRIVEN_SHARE` of their samples."""
+    st = problem.starts
+    return np.add.reduceat(problem.q, st[:-1])[wins] / np.diff(st)[wins] >= DRIVEN_SHARE
+
+
+def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
+                wins: np.ndarray, trial_of: np.ndarray) -> Trend | None:
+    """A steady change of the window defects ``a`` (m,) [rad/s^2] (of windows ``wins``, in
+    trials ``trial_of``) during the drive, and the defects with it taken out.
+
+    An effect that grows or fades as the wheel is driven (force lost to retained charge, to a
+    slower rise at higher speed, to a sagging supply) leaves the nominal fit a defect that
+    drifts through each drive: the fitted force law takes up its mean, not its change.  A
+    periodogram sees such a drift as a sinusoid of about one cycle per trial, a period that
+    names nothing.  So, over the driven windows (an actuator on for at least
+    :data:`DRIVEN_SHARE` of the samples; the coast has no force to lose), the defects are
+    regressed on each axis of :data:`TREND_AXES` (window means), with one intercept per
+    trial and one common slope, and F-tested against the intercepts alone.  The axis with the
+    smallest p-value is taken when p < :data:`TREND_SIGNIFICANCE` and half the change over
+    the axis' range reaches :data:`MIN_AMPLITUDE`.  The other axes' correlations with it
+    within the trials say whether the data could tell them apart.  None when there is no
+    such trend."""
+    st = problem.starts
+    if wins.size == 0:
+        return None
+
+    def window_mean(v: np.ndarray) -> np.ndarray:
+        ok = np.isfinite(v)
+        num = np.add.reduceat(np.where(ok, v, 0.0), st[:-1])[wins]
+        cnt = np.add.reduceat(ok.astype(float), st[:-1])[wins]
+        return np.where(cnt > 0, num / np.maximum(cnt, 1.0), np.nan)
+
+    driven = driven_windows(problem, wins)
+    trials = np.unique(trial_of[driven])
+    D = (trial_of[driven][:, None] == trials[None, :]).astype(float)
+    y = a[driven]
+    n = y.size
+    if n < D.shape[1] + 10:
+        return None
+    r0 = y - D @ np.linalg.lstsq(D, y, rcond=None)[0]
+    rss0 = float(r0 @ r0)
+    fits: dict[str, tuple[float, float, float, np.ndarray]] = {}
+    for name in TREND_AXES:
+        x = window_mean(axes[name])[driven]
+        if not np.all(np.isfinite(x)):
+            continue
+        xc = x - D @ np.linalg.lstsq(D, x, rcond=None)[0]      # within each trial
+        sxx = float(xc @ xc)
+        if sxx <= 0.0:
+            continue
+        slope = float(xc @ r0) / sxx
+        rss = rss0 - slope ** 2 * sxx
+        if not rss > 0.0 or n - D.shape[1] - 1 < 1:
+            continue
+        F = (rss0 - rss) / (rss / (n - D.shape[1] - 1))
+        fits[name] = (slope, float(stats.f.sf(F, 1, n - D.shape[1] - 1)),
+                      0.5 * abs(slope) * float(np.ptp(x)), xc)
+    if not fits:
+        return None
+    best = min(fits, key=lambda k: fits[k][1])
+    slope, p, amp, xc = fits[best]
+    if not (p < TREND_SIGNIFICANCE and amp >= MIN_AMPLITUDE):
+        return None
+    corr = {k: float(xc @ v[3] / math.sqrt((xc @ xc) * (v[3] @ v[3])))
+            for k, v in fits.items() if k != best}
+    return Trend(best, AXES[best][0], slope, amp, p, {k: v[1] for k, v in fits.items()},
+                 corr)
 
 
 def correlated_share(acf: np.ndarray, n: int) -> tuple[float, float]:
@@ -351,14 +468,16 @@ def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnosti
     acc, wins, trial_of = window_defects(problem, result.z, x2)
     diag.defects = acc
     if acc.size >= 20:
+        diag.trend = drive_trend(problem, axes, acc, wins, trial_of)
+        nuisance = scan_nuisance(problem, axes["time"], wins, trial_of)
         span = max(float(np.ptp(x1[problem.trial_slices[i]]))
                    for i in range(len(problem.trials)))
         duration = max(tr.duration for tr in problem.trials)
         for axis, x, fmax, res in (("wheel_angle_unwrapped", x1, 1.0, span),
                                    ("time", axes["time"], 0.45, duration)):
             step = 1.0 / (4.0 * res)
-            freqs = np.arange(1.5 / res, fmax, step)
-            amp, p = _defect_scan(problem, x, acc, wins, trial_of, freqs)
+            freqs = np.arange(MIN_CYCLES / res, fmax, step)
+            amp, p = _defect_scan(problem, x, acc, wins, nuisance, freqs)
             diag.spectra[axis] = (freqs, amp)
             order = np.argsort(p)
             taken: list[float] = []
@@ -414,6 +533,8 @@ def signatures(diag: Diagnostics, inertia: float) -> list[Signature]:
                    abs(u.period - sig.period) <= 0.02 * u.period for u in unique):
             unique.append(sig)
     out = unique
+    if diag.trend is not None:
+        out.append(trend_signature(diag.trend, inertia))
     periodic_axes = {s.axis for s in out}
     for name, st in diag.structures.items():
         if st.p_value > SIGNIFICANCE or st.amplitude < MIN_AMPLITUDE or name in periodic_axes:
@@ -430,6 +551,28 @@ def signatures(diag: Diagnostics, inertia: float) -> list[Signature]:
         if sig is not None:
             out.append(sig)
     return out
+
+
+def trend_signature(tr: Trend, inertia: float) -> Signature:
+    """The drive trend ``tr`` in words, as a signature along its axis (not periodic);
+    ``inertia`` [kg*m^2] (J/L) turns accelerations into torques."""
+    label = {"time": "time since the trial's start", "hv_time": "accumulated HV on-time of "
+             "the driven actuator", "speed": "speed"}
+    what = "grows" if tr.slope > 0 else "falls"
+    text = (f"drifts during each drive: the unmodelled acceleration {what} with "
+            f"{label[tr.axis]} by {tr.slope:+.3g} rad/s^2 per {tr.unit} ({tr.slope * inertia:+.2g}"
+            f" N*m per {tr.unit}), +-{tr.amplitude:.3g} rad/s^2 ({tr.amplitude * inertia:.2g} "
+            f"N*m) over the drives, p = {tr.p_value:.1e}")
+    others = [f"{label[k]} p = {tr.p_values[k]:.1e} (r = {c:+.2f} with it within the trials)"
+              for k, c in tr.correlations.items()]
+    if others:
+        text += "; against " + ", ".join(others)
+    alike = [label[k] for k, c in tr.correlations.items() if abs(c) > 0.9]
+    if alike:
+        text += (f": {' and '.join(alike)} rose with it in these trials, so the data cannot "
+                 f"tell which of them the change follows")
+    return Signature(tr.axis, tr.unit, None, tr.amplitude, tr.amplitude * inertia,
+                     tr.p_value, text)
 
 
 def autocorrelation_signature(diag: Diagnostics, inertia: float) -> Signature | None:

@@ -45,6 +45,9 @@ Search (forward selection).  Starting from the nominal model:
      effect's size must not trend with the trials' speed (:mod:`.consistency`): an
      off-centre mass standing in for an angle sensor's reading error grows as about
      speed^2, a reading error standing in for an off-centre mass falls as speed^-3.
+     Nor may it change within the trials: refitted on the first and the second half of
+     each drive, a rise lag standing in for charge retention is 8-15 % slower in the
+     second (:func:`~.consistency._drift`).
      Checked on the fit on all trials of every refit, so a stand-in is refused before its
      folds, and is not "backed" (no second start, no pair).
 
@@ -120,7 +123,7 @@ from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force
 from . import periodic
 from .metrics import TrialMetrics, drift_text, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
-from .residual import Diagnostics, analyse
+from .residual import TREND_AXES, Diagnostics, analyse
 from .screen import SCREEN_P, Screening, screen
 from .threads import with_one_blas_thread
 
@@ -563,7 +566,8 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         reference.pop("tau_f", None)
     restarted = False
     refused: dict[bytes, str | None] = {}
-    stand_ins: dict[str, tuple[Candidate, str]] = {}    # id -> (candidate, why a stand-in)
+    # id -> (candidate, why a stand-in, "speed" or "drift": how it was found)
+    stand_ins: dict[str, tuple[Candidate, str, str]] = {}
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
@@ -731,8 +735,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # alone shows only what the fit did not already absorb), the two strongest
         sigs = ident.diagnostics_after.signatures
         for sig in sigs:
-            if sig.axis == "autocorrelation":
-                # no axis shows it; the free run does: its drift trial by trial
+            if sig.axis == "autocorrelation" or (sig.period is None and sig.axis in TREND_AXES
+                                                 and sig.text.startswith("drifts")):
+                # no axis shows it, or only as a drift: the free run shows it trial by trial
                 sig.text += ("; the free run's steady-state speed error (simulated minus "
                              "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
@@ -743,10 +748,14 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # a library effect of the same shape that was refused as a stand-in tells how the
         # structure goes with speed, which the signature alone does not
         for sig in sigs:
-            for c, why in stand_ins.values():
-                # the library's periodic effects are once per turn (lap) of their axis
-                if (c.axis == sig.axis and c not in chosen and sig.period is not None
-                        and abs(sig.period / (2 * math.pi) - 1.0) < 0.02):
+            for c, why, kind in stand_ins.values():
+                # the library's periodic effects are once per turn (lap) of their axis; an
+                # effect that drifted within the trials goes with a drift
+                if c in chosen:
+                    continue
+                if (kind == "speed" and c.axis == sig.axis and sig.period is not None
+                        and abs(sig.period / (2 * math.pi) - 1.0) < 0.02) or \
+                        (kind == "drift" and sig.period is None and sig.axis in TREND_AXES):
                     sig.text += f"; refitted to it, {why}"
     return ident
 
