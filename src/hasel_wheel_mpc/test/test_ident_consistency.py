@@ -132,12 +132,13 @@ def test_the_drift_within_trials_is_the_weighted_mean_of_each_trials_log_ratio()
 
 @pytest.mark.parametrize("p, h, expected", [(1e-4, 0.09, True), (1e-4, -0.09, True),
                                             (1e-4, 0.03, False), (0.01, 0.09, False)])
-def test_an_effect_that_drifts_within_the_trials_is_inconsistent(p, h, expected):
+def test_a_drift_within_the_trials_is_a_caution_not_a_refusal(p, h, expected):
     c = K.Consistency("rise_lag", ["tau"], ["t"], np.zeros((1, 1)), np.zeros((1, 1)),
                       np.zeros(1), 0.0, 2, 1.0, [1.0], 0.0, 0.1, 1.0, drift=h, drift_sd=0.01,
                       drift_p=p)
-    assert K.drifts(c) is expected and K.inconsistent(c) is expected
-    assert not K.trends_with_speed(c)
+    assert K.drifts(c) is expected
+    assert (K.drift_caution(C.BY_ID["rise_lag"], c) is not None) is expected
+    assert not K.inconsistent(c) and K.stand_in_reason(C.BY_ID["rise_lag"], c) is None
 
 
 RETENTION = {"charge_retention": {"enabled": True, "rate": {"value": 0.2, "unit": "1/s"},
@@ -151,7 +152,7 @@ def test_the_right_effect_is_the_same_in_both_halves_of_every_drive(effects, cid
     # the halves are cut at the middle of the drive: the HV time of the second is about
     # three times the first's (a linear accumulation from 0: mean 1/4 against 3/4 of the end)
     assert np.all(c.hv[:, 1] > 2.0 * c.hv[:, 0]) and np.all(c.hv[:, 1] < 4.0 * c.hv[:, 0])
-    assert abs(c.drift) < 3 * c.drift_sd + 0.02 and not K.inconsistent(c)
+    assert abs(c.drift) < 3 * c.drift_sd + 0.02 and not K.drifts(c)
 
 
 def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():
@@ -159,5 +160,6 @@ def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():
     # be slower in the second half of each drive than in the first
     c = _consistency(RETENTION, "rise_lag", seed=11)
     assert np.all(c.halves[:, 1] > c.halves[:, 0])
-    assert c.drift > K.DRIFT and c.drift_p < 1e-6 and K.inconsistent(c)
-    assert "first to the second half" in c.drift_text()
+    assert c.drift > K.DRIFT and c.drift_p < 1e-6 and K.drifts(c)
+    why = K.drift_caution(C.BY_ID["rise_lag"], c)
+    assert "not the same throughout a trial" in why and "first to the second half" in why

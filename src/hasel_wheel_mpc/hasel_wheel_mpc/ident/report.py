@@ -16,7 +16,14 @@ fits                       {nominal: F, final: F}, F = {converged, evaluations, 
 chosen_effects             [stable identifier, ...] in the order chosen; [] when none
 effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             physical: {...}, physical_ci95: {name: [lo, hi]}, wald_p}]
-                            for the chosen ones (wald_p: "absent" in the final model)
+                            for the chosen ones (wald_p: "absent" in the final model);
+                            consistency: {speed_exponent, speed_exponent_sd,
+                            speed_trend_p, drift_exponent, drift_exponent_sd, drift_p,
+                            caution} the effect refitted trial by trial (size ~ speed^k)
+                            and on the halves of each drive (size ~ hv^h), as checked when
+                            it was added (ident/consistency.py); caution is a sentence
+                            when it changes within the trials, else null; null when not
+                            checked
 candidates                 [{round, id, score_statistic, score_dof, score_p,
                             predicted_window_rmse_rad, refitted, converged (null: not
                             refitted), window_rmse_rad,
@@ -36,7 +43,10 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             (ident/periodic.py): torque_N_m * sin(2 pi x / period +
                             phase_rad) along its axis x, with a 95 % interval; phase_rad
                             and torque_ci95_N_m are null where it is sized from the
-                            residual alone.  Axis "autocorrelation" (unit s, period null):
+                            residual alone.  Axis "time", "hv_time" or "speed" with
+                            period null: a drift during the drive (residual.drive_trend);
+                            amplitude_rad_s2 is half its change over the drives.
+                            Axis "autocorrelation" (unit s, period null):
                             a residual that is not white while no axis shows structure;
                             amplitude_rad_s2 is the constant acceleration error per window
                             that leaves as much correlated residual
@@ -72,7 +82,8 @@ import numpy as np
 from hasel_wheel_sim.model_file import save_model
 
 from . import plots
-from .candidates import BY_ID
+from .candidates import BY_ID, Candidate
+from .consistency import Consistency, drift_caution
 from .data import find_coasts
 from ..paper import TABLE_III
 from .metrics import TrialMetrics, pooled_rmse
@@ -89,6 +100,11 @@ def _num(v):
         return None
     v = float(v)
     return v if math.isfinite(v) else None
+
+
+def _fmt(v: float | None, spec: str) -> str:
+    """A JSON number for the Markdown; null (nan or inf) reads as "n/a"."""
+    return "n/a" if v is None else format(v, spec)
 
 
 def _params(ev: Evaluation, names: list[str] | None = None) -> dict:
@@ -185,7 +201,8 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                        "parameters": _params(ident.final, [p.name for p in c.params]),
                        "physical": c.describe(x),
                        "physical_ci95": _physical_ci(ident.final, c, x),
-                       "wald_p": _num(effect_wald_p(ident.final.fit, c))})
+                       "wald_p": _num(effect_wald_p(ident.final.fit, c)),
+                       "consistency": _consistency(c, ident.consistency.get(cid))})
     candidates, together = [], []
     for k, scs in enumerate(ident.screenings):
         rd = ident.rounds[k] if k < len(ident.rounds) else []
@@ -246,6 +263,16 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
     }
 
 
+def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
+    """The effect refitted trial by trial and on the halves of each drive, for the JSON."""
+    if con is None:
+        return None
+    return {"speed_exponent": _num(con.exponent), "speed_exponent_sd": _num(con.exponent_sd),
+            "speed_trend_p": _num(con.trend_p), "drift_exponent": _num(con.drift),
+            "drift_exponent_sd": _num(con.drift_sd), "drift_p": _num(con.drift_p),
+            "caution": drift_caution(c, con)}
+
+
 def _ci(ci: list) -> str:
     """An interval for the Markdown; null ends (infinite variance) mean undetermined."""
     if ci[0] is None or ci[1] is None:
@@ -295,6 +322,15 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
                              if isinstance(v, float) else f"{k} = {v}"
                              for k, v in e["physical"].items() if k != "gains")
             L += [f"* `{e['id']}` ({e['title']}): {ps}; {phys}; Wald p = {e['wald_p']:.1e}"]
+            k = e["consistency"]
+            if k is not None:
+                L += [f"  * refitted trial by trial: size ~ speed^k, k = "
+                      f"{_fmt(k['speed_exponent'], '+.2f')} +- {_fmt(k['speed_exponent_sd'], '.2f')}"
+                      f" (p = {_fmt(k['speed_trend_p'], '.1e')}); on the halves of each drive: "
+                      f"size ~ hv^h, h = {_fmt(k['drift_exponent'], '+.2f')} +- "
+                      f"{_fmt(k['drift_exponent_sd'], '.2f')} (p = {_fmt(k['drift_p'], '.1e')})"]
+                if k["caution"]:
+                    L += [f"  * **caution:** {k['caution']}"]
         L += [""]
     else:
         L += ["**No candidate effect is supported by the data; the paper's model is kept.**", ""]

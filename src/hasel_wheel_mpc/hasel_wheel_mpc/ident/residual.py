@@ -13,7 +13,10 @@ Two residuals come out of a fit (:class:`~.fit.Problem`):
 Structure is judged against each axis (wheel angle, pivot angle, contact angle, actuator
 index, time, accumulated HV time of the active actuator, speed, time since switch-on) by a
 one-way analysis of variance over bins, and against the unwrapped wheel angle and time by a
-least-squares sinusoid scan (a periodogram).  Samples of a are correlated over the filter
+least-squares sinusoid scan (a periodogram) of the windows' continuity defects, and by a
+regression of those defects on time, HV time and speed during the drive
+(:func:`drive_trend`): an effect that grows or fades through each drive is a drift, not a
+period of about one cycle per trial.  Samples of a are correlated over the filter
 length, so every test counts one independent sample per ``SG_WINDOW``.  When none of these
 finds structure but the output residual is not white, that is reported too
 (:func:`autocorrelation_signature`): a freely fitted force law can take up a missing effect

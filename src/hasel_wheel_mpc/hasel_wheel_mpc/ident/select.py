@@ -45,9 +45,10 @@ Search (forward selection).  Starting from the nominal model:
      effect's size must not trend with the trials' speed (:mod:`.consistency`): an
      off-centre mass standing in for an angle sensor's reading error grows as about
      speed^2, a reading error standing in for an off-centre mass falls as speed^-3.
-     Nor may it change within the trials: refitted on the first and the second half of
-     each drive, a rise lag standing in for charge retention is 8-15 % slower in the
-     second (:func:`~.consistency._drift`).
+     Refitted on the first and the second half of each drive as well, an effect that
+     changes within the trials is reported with a caution, not refused: a rise lag standing
+     in for charge retention is 8-15 % slower in the second halves, but so is a right
+     effect that takes up part of a missing one (:mod:`.consistency`).
      Checked on the fit on all trials of every refit, so a stand-in is refused before its
      folds, and is not "backed" (no second start, no pair).
 
@@ -117,7 +118,7 @@ from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import BY_ID, LIBRARY, Candidate
-from .consistency import stand_in
+from .consistency import Consistency, stand_in_reason, trial_consistency
 from .data import Trial
 from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates
 from . import periodic
@@ -171,6 +172,9 @@ class Identification:
     trials: list[Trial] = field(default_factory=list)
     base: WheelParams = field(default_factory=WheelParams)
     window: float = 1.0
+    #: the chosen effects refitted trial by trial and on the halves of each drive, as checked
+    #: when each was added (:mod:`.consistency`); keyed by effect id
+    consistency: dict[str, Consistency] = field(default_factory=dict)
 
     @property
     def chosen(self) -> tuple[str, ...]:
@@ -566,8 +570,8 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         reference.pop("tau_f", None)
     restarted = False
     refused: dict[bytes, str | None] = {}
-    # id -> (candidate, why a stand-in, "speed" or "drift": how it was found)
-    stand_ins: dict[str, tuple[Candidate, str, str]] = {}
+    stand_ins: dict[str, tuple[Candidate, str]] = {}    # id -> (candidate, why a stand-in)
+    checked: dict[int, dict[str, Consistency]] = {}     # id(fit) -> {effect: trial by trial}
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
@@ -578,10 +582,13 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         if key not in refused:
             why = implausibility(f, added)
             if why is None:
-                found = stand_in(trials, base, effects, f, added, window, threads)
-                if found is not None:
-                    why = found[1]
-                    stand_ins[found[0].id] = found
+                for c in added:
+                    con = trial_consistency(trials, base, effects, f, c, window, threads)
+                    checked.setdefault(id(f), {})[c.id] = con
+                    why = stand_in_reason(c, con)
+                    if why is not None:
+                        stand_ins[c.id] = (c, why)
+                        break
             refused[key] = why
         return refused[key]
 
@@ -716,6 +723,8 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             continue
         chosen = tuple(BY_ID[i] for i in best.effects)
         current = best
+        # each chosen effect as it was checked trial by trial when it was added
+        ident.consistency.update(checked.get(id(best.fit), {}))
     ident.final = current
     if analyse_residuals:
         say("residual analysis")
@@ -748,14 +757,10 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # a library effect of the same shape that was refused as a stand-in tells how the
         # structure goes with speed, which the signature alone does not
         for sig in sigs:
-            for c, why, kind in stand_ins.values():
-                # the library's periodic effects are once per turn (lap) of their axis; an
-                # effect that drifted within the trials goes with a drift
-                if c in chosen:
-                    continue
-                if (kind == "speed" and c.axis == sig.axis and sig.period is not None
-                        and abs(sig.period / (2 * math.pi) - 1.0) < 0.02) or \
-                        (kind == "drift" and sig.period is None and sig.axis in TREND_AXES):
+            for c, why in stand_ins.values():
+                # the library's periodic effects are once per turn (lap) of their axis
+                if (c.axis == sig.axis and c not in chosen and sig.period is not None
+                        and abs(sig.period / (2 * math.pi) - 1.0) < 0.02):
                     sig.text += f"; refitted to it, {why}"
     return ident
 
