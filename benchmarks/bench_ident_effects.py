@@ -37,6 +37,7 @@ from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import metrics as M
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.ident.consistency import drift_caution
 from hasel_wheel_mpc.model_compare import compare_controllers
 from hasel_wheel_mpc.observer import ObserverConfig
 from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
@@ -269,6 +270,13 @@ def run_realistic() -> None:
           f"top); held-out simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
           f"{res.final.sim_heldout_rmse:.4f} rad/s; unexplained: {unexplained}; refits: "
           f"{refits}; {dt:.0f} s")
+    # each chosen effect as it was checked when added: trial by trial, and on the halves
+    # of each drive (a drift is a caution, not a refusal)
+    for cid, con in res.consistency.items():
+        print(f"  {cid}: size ~ speed^k, k = {con.exponent:+.2f} +- {con.exponent_sd:.2f} "
+              f"(p = {con.trend_p:.1e}); size ~ hv^h, h = {con.drift:+.2f} +- "
+              f"{con.drift_sd:.2f} (p = {con.drift_p:.1e})"
+              + ("; caution" if drift_caution(C.BY_ID[cid], con) else ""))
 
 
 def main() -> None:

@@ -338,7 +338,9 @@ class Problem:
         are 0 and say only "inside"), so the variance is over those, and their
         autocorrelation is taken about zero (the zeros are not noise about a mean)."""
         active = self.ok & (r != 0.0) if self.quantum is not None else self.ok
-        dof = max(int(active.sum()) - g - 2 * self.n_windows, 1)
+        # a window with no counted sample (outside ``keep``) fits no start
+        weighed = int(np.count_nonzero(np.add.reduceat(self.ok, self.starts[:-1])))
+        dof = max(int(active.sum()) - g - 2 * weighed, 1)
         return (float(r @ r) / dof,
                 autocorrelation_inflation(r, self.starts, active,
                                           centred=self.quantum is None))

@@ -22,7 +22,8 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             caution} the effect refitted trial by trial (size ~ speed^k)
                             and on the halves of each drive (size ~ hv^h), as checked when
                             it was added (ident/consistency.py); caution is a sentence
-                            when it changes within the trials, else null; null when not
+                            when it changes within the trials, else null; an exponent and
+                            its p are null where they cannot be formed; null when not
                             checked
 candidates                 [{round, id, score_statistic, score_dof, score_p,
                             predicted_window_rmse_rad, refitted, converged (null: not
@@ -267,9 +268,14 @@ def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
     """The effect refitted trial by trial and on the halves of each drive, for the JSON."""
     if con is None:
         return None
-    return {"speed_exponent": _num(con.exponent), "speed_exponent_sd": _num(con.exponent_sd),
-            "speed_trend_p": _num(con.trend_p), "drift_exponent": _num(con.drift),
-            "drift_exponent_sd": _num(con.drift_sd), "drift_p": _num(con.drift_p),
+    speed = math.isfinite(con.exponent_sd)            # formed (see consistency._trend)
+    drift = math.isfinite(con.drift_sd)
+    return {"speed_exponent": _num(con.exponent) if speed else None,
+            "speed_exponent_sd": _num(con.exponent_sd),
+            "speed_trend_p": _num(con.trend_p) if speed else None,
+            "drift_exponent": _num(con.drift) if drift else None,
+            "drift_exponent_sd": _num(con.drift_sd),
+            "drift_p": _num(con.drift_p) if drift else None,
             "caution": drift_caution(c, con)}
 
 

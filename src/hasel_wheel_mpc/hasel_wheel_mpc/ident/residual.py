@@ -43,9 +43,10 @@ MIN_WINDOW_GAIN = 0.2   # a sinusoid that the window means shrink below this is 
 #: (:func:`drive_trend`), and the p-value below which one counts (three tests, not a scan).
 TREND_AXES = ("time", "hv_time", "speed")
 TREND_SIGNIFICANCE = 1e-4
-#: The periodograms' longest period: the longest trial's span (in time, in wheel angle) over
-#: this many cycles.  Fewer cycles than this are a drift's shape, not a period (see
-#: :func:`scan_nuisance`).
+#: With a drift found (:func:`drive_trend`), the periodograms' longest period: the longest
+#: trial's span (in time, in wheel angle) over this many cycles.  Fewer cycles than this are
+#: then the drift's shape, not a period (:func:`scan_nuisance`).  Without a drift they start
+#: at 1.5 cycles, with one level per trial.
 MIN_CYCLES = 3.0
 #: A window counts as driven when an actuator is on for at least this share of its samples.
 DRIVEN_SHARE = 0.2
@@ -293,19 +294,32 @@ def window_defects(problem: Problem, z: np.ndarray, x2: np.ndarray
     return a, wins, problem.window_trial[wins] if wins.size else wins
 
 
+def scan_setup(problem: Problem, t_rel: np.ndarray, wins: np.ndarray, trial_of: np.ndarray,
+               trend: Trend | None) -> tuple[np.ndarray, float]:
+    """(nuisance (m, k), fewest cycles per the longest trial's span) for the periodograms of
+    the window defects of windows ``wins`` (m,) in trials ``trial_of``.  Without a drift,
+    one level per trial from 1.5 cycles, so that a slow period (a pivot lap on a short or
+    slow trial) is still scanned; with one, :func:`scan_nuisance` from :data:`MIN_CYCLES`."""
+    if trend is None:
+        return (trial_of[:, None] == np.unique(trial_of)[None, :]).astype(float), 1.5
+    return scan_nuisance(problem, t_rel, wins, trial_of), MIN_CYCLES
+
+
 def scan_nuisance(problem: Problem, t_rel: np.ndarray, wins: np.ndarray,
                   trial_of: np.ndarray) -> np.ndarray:
     """(m, k) what the periodograms fit besides a sinusoid, for the window defects of windows
     ``wins`` (m,) in trials ``trial_of``: each trial's coast its own level, each trial's
     drive a quadratic in time (``t_rel`` (n,) [s] since the trial's start, window means).
 
-    An effect that grows or fades during the drive leaves a defect that drifts through it,
-    with a bend where the wheel spins up, and the force law's mean misfit shows only while
-    driven, as a step at the coast.  With one level per trial, a periodogram takes such a
-    drift for a sinusoid of about one cycle per trial (seen with charge retention of 0.2/s
-    left out: "periodic in time with period 22.6 s" and "in wheel angle with period 60.8
-    rad", 3 x 34 s, seed 11, ad hoc).  A slow drift is a trend (:func:`drive_trend`), not a
-    period; a quadratic takes up its shape and leaves the sinusoids of two cycles or more."""
+    Used when a drift is found (:func:`drive_trend`).  An effect that grows or fades during
+    the drive leaves a defect that drifts through it, with a bend where the wheel spins up,
+    and the force law's mean misfit shows only while driven, as a step at the coast.  With
+    one level per trial, a periodogram takes such a drift for a sinusoid of about one cycle
+    per trial (seen with charge retention of 0.2/s left out: "periodic in time with period
+    22.6 s" and "in wheel angle with period 60.8 rad", 3 x 34 s, seed 11, ad hoc).  A slow
+    drift is a trend, not a period.  A quadratic takes up its shape, and with it part of a
+    slow sinusoid: at worst 92 % of its variance at one cycle per drive, 43 % at 1.5, 15 %
+    at 2 and 7 % at 3, hence the scan from :data:`MIN_CYCLES` then."""
     st = problem.starts
     lengths = np.diff(st)[wins].astype(float)
     t = np.add.reduceat(t_rel, st[:-1])[wins] / lengths
@@ -375,9 +389,11 @@ def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
     regressed on each axis of :data:`TREND_AXES` (window means), with one intercept per
     trial and one common slope, and F-tested against the intercepts alone.  The axis with the
     smallest p-value is taken when p < :data:`TREND_SIGNIFICANCE` and half the change over
-    the axis' range reaches :data:`MIN_AMPLITUDE`.  The other axes' correlations with it
-    within the trials say whether the data could tell them apart.  None when there is no
-    such trend."""
+    the axis' range reaches :data:`MIN_AMPLITUDE`; its p-value is the smallest of the
+    three, times three (Bonferroni).  The other axes' correlations with it within the
+    trials say whether the data could tell them apart.  The axis that fits best need not
+    be the cause: the fitted force law's speed term takes up the part of a missing torque
+    that follows the speed.  None when there is no such trend."""
     st = problem.starts
     if wins.size == 0:
         return None
@@ -417,6 +433,7 @@ def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
         return None
     best = min(fits, key=lambda k: fits[k][1])
     slope, p, amp, xc = fits[best]
+    p = min(len(TREND_AXES) * p, 1.0)
     if not (p < TREND_SIGNIFICANCE and amp >= MIN_AMPLITUDE):
         return None
     corr = {k: float(xc @ v[3] / math.sqrt((xc @ xc) * (v[3] @ v[3])))
@@ -472,14 +489,14 @@ def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnosti
     diag.defects = acc
     if acc.size >= 20:
         diag.trend = drive_trend(problem, axes, acc, wins, trial_of)
-        nuisance = scan_nuisance(problem, axes["time"], wins, trial_of)
+        nuisance, cycles = scan_setup(problem, axes["time"], wins, trial_of, diag.trend)
         span = max(float(np.ptp(x1[problem.trial_slices[i]]))
                    for i in range(len(problem.trials)))
         duration = max(tr.duration for tr in problem.trials)
         for axis, x, fmax, res in (("wheel_angle_unwrapped", x1, 1.0, span),
                                    ("time", axes["time"], 0.45, duration)):
             step = 1.0 / (4.0 * res)
-            freqs = np.arange(MIN_CYCLES / res, fmax, step)
+            freqs = np.arange(cycles / res, fmax, step)
             amp, p = _defect_scan(problem, x, acc, wins, nuisance, freqs)
             diag.spectra[axis] = (freqs, amp)
             order = np.argsort(p)
@@ -536,11 +553,12 @@ def signatures(diag: Diagnostics, inertia: float) -> list[Signature]:
                    abs(u.period - sig.period) <= 0.02 * u.period for u in unique):
             unique.append(sig)
     out = unique
+    periodic_axes = {s.axis for s in out}
     if diag.trend is not None:
         out.append(trend_signature(diag.trend, inertia))
-    periodic_axes = {s.axis for s in out}
+    described = {s.axis for s in out}
     for name, st in diag.structures.items():
-        if st.p_value > SIGNIFICANCE or st.amplitude < MIN_AMPLITUDE or name in periodic_axes:
+        if st.p_value > SIGNIFICANCE or st.amplitude < MIN_AMPLITUDE or name in described:
             continue
         if AXES[name][1] is not None and periodic_axes:
             continue                      # a periodic axis already described by a peak

@@ -47,8 +47,8 @@ Search (forward selection).  Starting from the nominal model:
      speed^2, a reading error standing in for an off-centre mass falls as speed^-3.
      Refitted on the first and the second half of each drive as well, an effect that
      changes within the trials is reported with a caution, not refused: a rise lag standing
-     in for charge retention is 8-15 % slower in the second halves, but so is a right
-     effect that takes up part of a missing one (:mod:`.consistency`).
+     in for charge retention is slower in the second halves, but a right drag that takes
+     up part of a missing retention grows there too (:mod:`.consistency`).
      Checked on the fit on all trials of every refit, so a stand-in is refused before its
      folds, and is not "backed" (no second start, no pair).
 
@@ -571,7 +571,8 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     restarted = False
     refused: dict[bytes, str | None] = {}
     stand_ins: dict[str, tuple[Candidate, str]] = {}    # id -> (candidate, why a stand-in)
-    checked: dict[int, dict[str, Consistency]] = {}     # id(fit) -> {effect: trial by trial}
+    # (the fit's packed vector, effect id) -> the effect refitted trial by trial
+    checked: dict[tuple[bytes, str], Consistency] = {}
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
@@ -584,7 +585,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             if why is None:
                 for c in added:
                     con = trial_consistency(trials, base, effects, f, c, window, threads)
-                    checked.setdefault(id(f), {})[c.id] = con
+                    checked[(f.z.tobytes(), c.id)] = con
                     why = stand_in_reason(c, con)
                     if why is not None:
                         stand_ins[c.id] = (c, why)
@@ -724,7 +725,8 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         chosen = tuple(BY_ID[i] for i in best.effects)
         current = best
         # each chosen effect as it was checked trial by trial when it was added
-        ident.consistency.update(checked.get(id(best.fit), {}))
+        ident.consistency.update({i: checked[(best.fit.z.tobytes(), i)] for i in best.effects
+                                  if (best.fit.z.tobytes(), i) in checked})
     ident.final = current
     if analyse_residuals:
         say("residual analysis")
