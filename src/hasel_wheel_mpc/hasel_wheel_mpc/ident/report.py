@@ -46,7 +46,8 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             and torque_ci95_N_m are null where it is sized from the
                             residual alone.  Axis "time", "hv_time" or "speed" with
                             period null: a drift during the drive (residual.drive_trend);
-                            amplitude_rad_s2 is half its change over the drives.
+                            amplitude_rad_s2 is half the fitted curve's largest range
+                            within a trial.
                             Axis "autocorrelation" (unit s, period null):
                             a residual that is not white while no axis shows structure;
                             amplitude_rad_s2 is the constant acceleration error per window

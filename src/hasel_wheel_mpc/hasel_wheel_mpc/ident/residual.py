@@ -43,10 +43,16 @@ MIN_WINDOW_GAIN = 0.2   # a sinusoid that the window means shrink below this is 
 #: (:func:`drive_trend`), and the p-value below which one counts (three tests, not a scan).
 TREND_AXES = ("time", "hv_time", "speed")
 TREND_SIGNIFICANCE = 1e-4
-#: With a drift found (:func:`drive_trend`), the periodograms' longest period: the longest
-#: trial's span (in time, in wheel angle) over this many cycles.  Fewer cycles than this are
-#: then the drift's shape, not a period (:func:`scan_nuisance`).  Without a drift they start
-#: at 1.5 cycles, with one level per trial.
+#: The periodograms' longest period: the longest trial's span (in time, in wheel angle) over
+#: this many cycles, without a drift.  A shape of fewer cycles is no period one can name:
+#: after a rise lag and a gain spread were named for retention of 0.2/s (3 x 34 s, seeds 11
+#: and 13, ad hoc), a scan from 1.5 cycles reported "periodic in time with period 22.6 s"
+#: and "in wheel angle with period 60.8 rad", 1.5 and 1.6 cycles of the longest trial.  A
+#: pivot lap (25.66 rad of wheel angle) is scanned on trials spanning 51 rad or more.
+FEWEST_CYCLES = 2.0
+#: With a drift found (:func:`drive_trend`), the periodograms start at this many cycles: a
+#: quadratic per drive then takes up the drift's shape, and part of a slower sinusoid
+#: (:func:`scan_nuisance`).
 MIN_CYCLES = 3.0
 #: A window counts as driven when an actuator is on for at least this share of its samples.
 DRIVEN_SHARE = 0.2
@@ -114,8 +120,9 @@ class Signature:
 class Trend:
     """A steady change of the unmodelled acceleration during the drive (:func:`drive_trend`).
 
-    ``axis`` the axis it follows best (``unit`` its unit); ``slope`` [rad/s^2 per unit];
-    ``amplitude`` [rad/s^2] half its change over the axis' range in the driven windows;
+    ``axis`` the axis it follows best (``unit`` its unit); ``slope`` [rad/s^2 per unit] of
+    its straight part; ``amplitude`` [rad/s^2] half the largest range of the fitted curve
+    (line and bend) within a trial's driven windows;
     ``p_value`` of "no slope"; ``p_values`` that of every axis of :data:`TREND_AXES`;
     ``correlations`` the correlation within trials of the other axes with ``axis`` [1]."""
 
@@ -298,10 +305,11 @@ def scan_setup(problem: Problem, t_rel: np.ndarray, wins: np.ndarray, trial_of: 
                trend: Trend | None) -> tuple[np.ndarray, float]:
     """(nuisance (m, k), fewest cycles per the longest trial's span) for the periodograms of
     the window defects of windows ``wins`` (m,) in trials ``trial_of``.  Without a drift,
-    one level per trial from 1.5 cycles, so that a slow period (a pivot lap on a short or
-    slow trial) is still scanned; with one, :func:`scan_nuisance` from :data:`MIN_CYCLES`."""
+    one level per trial from :data:`FEWEST_CYCLES`, so that a slow period (a pivot lap on a
+    short or slow trial) is still scanned; with one, :func:`scan_nuisance` from
+    :data:`MIN_CYCLES`."""
     if trend is None:
-        return (trial_of[:, None] == np.unique(trial_of)[None, :]).astype(float), 1.5
+        return (trial_of[:, None] == np.unique(trial_of)[None, :]).astype(float), FEWEST_CYCLES
     return scan_nuisance(problem, t_rel, wins, trial_of), MIN_CYCLES
 
 
@@ -387,10 +395,12 @@ def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
     names nothing.  So, over the driven windows (an actuator on for at least
     :data:`DRIVEN_SHARE` of the samples; the coast has no force to lose), the defects are
     regressed on each axis of :data:`TREND_AXES` (window means), with one intercept per
-    trial and one common slope, and F-tested against the intercepts alone.  The axis with the
-    smallest p-value is taken when p < :data:`TREND_SIGNIFICANCE` and half the change over
-    the axis' range reaches :data:`MIN_AMPLITUDE`; its p-value is the smallest of the
-    three, times three (Bonferroni).  The other axes' correlations with it within the
+    trial, one common slope and one common bend (the axis squared, apart from the line: a
+    drift need not be straight, e.g. where the wheel spins up), and F-tested (2 dof)
+    against the intercepts alone.  The axis with the smallest p-value is taken when
+    p < :data:`TREND_SIGNIFICANCE` and half the fitted curve's largest range within a trial
+    reaches :data:`MIN_AMPLITUDE`; its p-value is the smallest of the three, times three
+    (Bonferroni).  ``slope`` is the line's.  The other axes' correlations with it within the
     trials say whether the data could tell them apart.  The axis that fits best need not
     be the cause: the fitted force law's speed term takes up the part of a missing torque
     that follows the speed.  None when there is no such trend."""
@@ -422,13 +432,22 @@ def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
         sxx = float(xc @ xc)
         if sxx <= 0.0:
             continue
+        # the bend: the square of the axis, within each trial and apart from the line
+        q = (xc / math.sqrt(sxx / n)) ** 2
+        qc = q - D @ np.linalg.lstsq(D, q, rcond=None)[0]
+        qc -= xc * float(xc @ qc) / sxx
+        sqq = float(qc @ qc)
         slope = float(xc @ r0) / sxx
-        rss = rss0 - slope ** 2 * sxx
-        if not rss > 0.0 or n - D.shape[1] - 1 < 1:
+        bend = float(qc @ r0) / sqq if sqq > 1e-12 * n else 0.0
+        curve = slope * xc + bend * qc
+        dof = n - D.shape[1] - 2
+        rss = rss0 - float(curve @ curve)
+        if not rss > 0.0 or dof < 1:
             continue
-        F = (rss0 - rss) / (rss / (n - D.shape[1] - 1))
-        fits[name] = (slope, float(stats.f.sf(F, 1, n - D.shape[1] - 1)),
-                      0.5 * abs(slope) * float(np.ptp(x)), xc)
+        F = ((rss0 - rss) / 2) / (rss / dof)
+        tj = trial_of[driven]
+        amp = 0.5 * max(float(np.ptp(curve[tj == j])) for j in trials)
+        fits[name] = (slope, float(stats.f.sf(F, 2, dof)), amp, xc)
     if not fits:
         return None
     best = min(fits, key=lambda k: fits[k][1])
@@ -580,10 +599,11 @@ def trend_signature(tr: Trend, inertia: float) -> Signature:
     label = {"time": "time since the trial's start", "hv_time": "accumulated HV on-time of "
              "the driven actuator", "speed": "speed"}
     what = "grows" if tr.slope > 0 else "falls"
-    text = (f"drifts during each drive: the unmodelled acceleration {what} with "
-            f"{label[tr.axis]} by {tr.slope:+.3g} rad/s^2 per {tr.unit} ({tr.slope * inertia:+.2g}"
-            f" N*m per {tr.unit}), +-{tr.amplitude:.3g} rad/s^2 ({tr.amplitude * inertia:.2g} "
-            f"N*m) over the drives, p = {tr.p_value:.1e}")
+    text = (f"drifts during each drive: the unmodelled acceleration changes along "
+            f"{label[tr.axis]}, +-{tr.amplitude:.3g} rad/s^2 ({tr.amplitude * inertia:.2g} N*m) "
+            f"over the drives (a line and a bend), p = {tr.p_value:.1e}; its straight part "
+            f"{what} by {tr.slope:+.3g} rad/s^2 per {tr.unit} ({tr.slope * inertia:+.2g} N*m "
+            f"per {tr.unit})")
     others = [f"{label[k]} p = {tr.p_values[k]:.1e} (r = {c:+.2f} with it within the trials)"
               for k, c in tr.correlations.items()]
     if others:
