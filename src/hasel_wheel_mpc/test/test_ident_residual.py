@@ -195,5 +195,16 @@ def test_without_a_drift_the_scans_keep_one_level_per_trial_and_slow_periods(win
     trend = R.Trend("time", "s", -0.001, 0.01, 1e-8, {"time": 1e-8}, {})
     D2, cycles2 = R.scan_setup(prob, axes["time"], wins, trial_of, trend)
     assert cycles2 == R.MIN_CYCLES
-    assert np.array_equal(D2, R.scan_nuisance(prob, axes["time"], wins, trial_of))
     assert D2.shape[1] == 3 * (1 + 3)          # each trial: a coast level, a drive quadratic
+    # any quadratic drift through each drive, with its own level in each coast, lies in the
+    # nuisance's span: nothing of it is left for a sinusoid to take
+    t = _window_mean(prob, wins, axes["time"])
+    driven = R.driven_windows(prob, wins)
+    coef = np.array([[0.01, -0.002, 3e-5], [-0.02, 0.001, -4e-5], [0.005, 0.0, 2e-5]])
+    drift = np.where(driven, coef[trial_of, 0] + coef[trial_of, 1] * t
+                     + coef[trial_of, 2] * t ** 2, np.array([0.001, -0.003, 0.002])[trial_of])
+    left = drift - D2 @ np.linalg.lstsq(D2, drift, rcond=None)[0]
+    assert np.max(np.abs(left)) < 1e-12 * np.max(np.abs(drift)) + 1e-15
+    # with one level per trial, most of it is left
+    left1 = drift - D @ np.linalg.lstsq(D, drift, rcond=None)[0]
+    assert np.linalg.norm(left1) > 0.5 * np.linalg.norm(drift - drift.mean())

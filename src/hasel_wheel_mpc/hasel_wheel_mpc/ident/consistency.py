@@ -48,9 +48,10 @@ is averaged over the trials with inverse-variance weights (:func:`_drift`).  Wit
 the speed rises with the HV time (the wheel spins up through the whole drive), so this does
 not tell an effect of speed from one of HV time: it tells an effect that is one value from
 one that is not.  Ad hoc, 3 x 34 s, plant seeds 11-13 (README): a rise lag fitted to
-retention of 0.2/s gave h = +0.08..+0.09 +- 0.01 (p <= 1e-30); the right models of eight
-effects alone p >= 0.2 (|h| <= 0.01 for the torques, up to 0.25 +- 0.25 for the gain spread,
-whose fifteen gains a half determines poorly).  But a right effect drifts too when another
+retention of 0.2/s gave h = +0.08..+0.09 +- 0.01 (p <= 1e-30); nine right models alone
+(seven effects, retention and rise lag at two sizes each) p >= 0.2 (|h| <= 0.01 for the
+torques and the sensor eccentricity, up to 0.25 +- 0.25 for the gain spread, whose fifteen
+gains a half determines poorly).  But a right effect drifts too when another
 one that changes during the trial is still missing: on the realistic plant (5 x 60 s,
 retention 0.01/s and a 10 ms rise lag among its effects; ``bench_ident_effects.py`` prints
 it) the right viscous drag, fourth in the model, gives h = +0.07 +- 0.01 (p = 2e-8).  As
@@ -335,12 +336,6 @@ def _trend(u: np.ndarray, covs: list[np.ndarray], pooled: np.ndarray,
     return float(k), float(sd), float(2 * stats.norm.sf(abs(b) / math.sqrt(cov[1, 1])))
 
 
-def trends_with_speed(c: Consistency | None) -> bool:
-    """True when the effect's size trends with the trials' speed: significantly
-    (p < TREND_P) and steeper than speed^(+-EXPONENT)."""
-    return c is not None and c.trend_p < TREND_P and abs(c.exponent) > EXPONENT
-
-
 def drifts(c: Consistency | None) -> bool:
     """True when the effect's size changes within the trials as the actuators accumulate HV
     time: significantly (p < TREND_P) and steeper than hv^(+-DRIFT)."""
@@ -348,16 +343,16 @@ def drifts(c: Consistency | None) -> bool:
 
 
 def inconsistent(c: Consistency | None) -> bool:
-    """True when the effect is not one value across the trials: it trends with their speed
-    (:func:`trends_with_speed`).  A drift within the trials (:func:`drifts`) is reported,
-    not refused (see the module docstring)."""
-    return trends_with_speed(c)
+    """True when the effect is not one value across the trials: its size trends with their
+    speed, significantly (p < TREND_P) and steeper than speed^(+-EXPONENT).  A drift within
+    the trials (:func:`drifts`) is reported, not refused (see the module docstring)."""
+    return c is not None and c.trend_p < TREND_P and abs(c.exponent) > EXPONENT
 
 
 def stand_in_reason(c: Candidate, con: Consistency | None) -> str | None:
     """Why ``c``, refitted trial by trial as ``con``, looks like a stand-in for another
     effect (its size trends with the trials' speed); None when it does not."""
-    if not trends_with_speed(con):
+    if not inconsistent(con):
         return None
     return (f"{c.id} is not the same in every trial, refitted trial by trial: {con.text(c)}; "
             f"a physical {c.id} would not change with the speed, so it stands in for an "
