@@ -331,6 +331,64 @@ def test_an_effect_outside_the_library_that_the_force_law_takes_up_is_reported_a
     assert named.diagnostics_after.correlated_share < RES.CORRELATED_SHARE / 3
 
 
+def test_a_gain_spread_outside_the_library_is_reported_along_the_actuator_index():
+    # fabrication spread of std 0.1 with its candidate left out (plant seed 11): nothing is
+    # named; the structure is reported along the actuator index, its force factors measured
+    # by a refit, where the residual's bins saw nothing and a periodogram saw only the
+    # pattern's first harmonic ("1 per wheel turn", which would name an off-centre mass)
+    spread = {"gain_spread": {"enabled": True, "std": {"value": 0.1, "unit": "1"}}}
+    trials = _trials(spread, seed=11)
+    res = SEL.identify(trials, k_folds=3, library=C.library(exclude=["gain_spread"]))
+    assert res.chosen == ()
+    sigs = res.diagnostics_after.signatures
+    assert [s.axis for s in sigs] == ["actuator"] and sigs[0].p_value < RES.SIGNIFICANCE
+    # the plant's gains, as it drew them from the seed, relative to their geometric mean
+    truth = np.array(effects_from_mapping({**ENCODER, **spread}).extensions(
+        np.random.default_rng(11)).gains)
+    truth /= np.exp(np.mean(np.log(truth)))
+    factors = np.array(sigs[0].factors)
+    assert np.corrcoef(np.log(factors), np.log(truth))[0, 1] > 0.95
+    assert np.std(factors) == pytest.approx(np.std(truth), rel=0.15)
+    assert np.max(np.abs(factors - truth)) < 0.03
+    data = to_json(res, [], [])
+    assert data["unexplained"][0]["actuator_factors"] == pytest.approx(list(factors))
+    # the first harmonic the periodogram saw is set apart, not reported
+    assert all(u["axis"] != "actuator" for u in data["unconfirmed"])
+
+
+@pytest.mark.parametrize("effect, excluded, axes", [
+    ({"rise_lag": {"enabled": True, "time_constant": {"value": 0.04, "unit": "s"}}},
+     "rise_lag", ("speed",)),
+    ({"charge_retention": {"enabled": True, "rate": {"value": 0.2, "unit": "1/s"},
+                           "recovery": {"value": 300.0, "unit": "s"}}},
+     "charge_retention", ("hv_time", "time")),
+])
+def test_look_alike_losses_outside_the_library_drift_along_their_own_axis(effect, excluded,
+                                                                         axes):
+    # a rise lag and charge retention both weaken the force as a drive goes on, the one with
+    # the speed, the other with the HV time.  On the paper's protocol (5 x 60 s; 50 s drives
+    # in which the speed levels off while the HV time keeps growing), with either left out of
+    # the library, the other is not named in its place (refused as a stand-in, or not
+    # supported), and the drift left over follows the right axis: speed for the rise lag,
+    # HV time (or the time since the trial's start, which rises with it) for retention.  On
+    # 3 x 34 s the two are named for each other (the test above)
+    res = SEL.identify(_trials(effect, seed=11, specs=S.PAPER_SET), k_folds=5,
+                       library=C.library(exclude=[excluded]))
+    assert res.chosen == ()
+    trend = res.diagnostics_after.trend
+    assert trend is not None and trend.axis in axes and trend.p_value < 1e-20
+    other = {"speed"} if "time" in axes else {"time", "hv_time"}
+    assert all(trend.p_values[k] > 1e6 * trend.p_values[trend.axis] for k in other)
+    sigs = res.diagnostics_after.signatures
+    assert [s.axis for s in sigs if s.period is None] == [trend.axis]
+    if excluded == "rise_lag":
+        # the periods of 2-4 per wheel turn the periodograms also show are not confirmed
+        # by their refits, and are set apart
+        assert len(sigs) == 1 and res.unconfirmed
+    # (with retention of 0.2/s the free run is 0.3 rad/s off, and refits do confirm periods
+    # of 3-4 per wheel turn beside the drift: noted in the README, not asserted away)
+
+
 def test_a_rise_lag_standing_in_for_charge_retention_is_named_with_a_caution():
     # retention of 0.2/s with its candidate left out (plant seed 11): a rise lag and a gain
     # spread are named (a wrong name: both weaken the force, and speed and HV time rise

@@ -1,5 +1,6 @@
 """Whiteness of the residual: the mean autocorrelation against its closed form, and the
 signature a correlated residual gets when no axis shows structure (ident/residual.py)."""
+import dataclasses
 import math
 import re
 
@@ -208,3 +209,13 @@ def test_without_a_drift_the_scans_keep_one_level_per_trial_and_slow_periods(win
     # with one level per trial, most of it is left
     left1 = drift - D @ np.linalg.lstsq(D, drift, rcond=None)[0]
     assert np.linalg.norm(left1) > 0.5 * np.linalg.norm(drift - drift.mean())
+
+
+def test_a_period_its_refit_does_not_confirm_is_set_apart():
+    from hasel_wheel_mpc.ident.periodic import confirmed
+    sig = R.Signature("wheel_angle", "rad", 2 * math.pi, 0.02, 0.0007, 1e-9, "periodic")
+    assert confirmed(sig)                                   # sized from the residual alone
+    sized = dataclasses.replace(sig, torque_ci95=(0.0005, 0.0009))
+    assert confirmed(sized)
+    assert not confirmed(dataclasses.replace(sized, torque_ci95=(0.0, 0.0009)))  # reaches 0
+    assert not confirmed(dataclasses.replace(sized, amplitude=0.5 * R.MIN_AMPLITUDE))

@@ -114,6 +114,9 @@ class Signature:
     #: interval [N*m].  None when sized from the residual alone
     phase: float | None = None
     torque_ci95: tuple[float, float] | None = None
+    #: for a signature along the actuator index sized by a refit (:mod:`.actuator`): the 16
+    #: actuators' force factors [1] (their geometric mean 1).  None otherwise
+    factors: tuple[float, ...] | None = None
 
 
 @dataclass

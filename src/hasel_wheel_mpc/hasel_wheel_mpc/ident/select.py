@@ -121,10 +121,10 @@ from .candidates import BY_ID, LIBRARY, Candidate
 from .consistency import Consistency, stand_in_reason, trial_consistency
 from .data import Trial
 from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates
-from . import periodic
+from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
-from .residual import TREND_AXES, Diagnostics, analyse
+from .residual import TREND_AXES, Diagnostics, Signature, analyse
 from .screen import SCREEN_P, Screening, screen
 from .threads import with_one_blas_thread
 
@@ -175,6 +175,9 @@ class Identification:
     #: the chosen effects refitted trial by trial and on the halves of each drive, as checked
     #: when each was added (:mod:`.consistency`); keyed by effect id
     consistency: dict[str, Consistency] = field(default_factory=dict)
+    #: periodic signatures of the residual that their refit did not confirm
+    #: (:func:`~.periodic.confirmed`): listed apart, not as unexplained structure
+    unconfirmed: list[Signature] = field(default_factory=list)
 
     @property
     def chosen(self) -> tuple[str, ...]:
@@ -752,10 +755,29 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 sig.text += ("; the free run's steady-state speed error (simulated minus "
                              "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
+        beside: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
         for i in todo:
             say(f"sizing the unexplained signature: {sigs[i].text}")
-            sigs[i] = periodic.measure(sigs[i], trials, base, chosen, current.fit, window,
-                                       threads)
+            sigs[i], refit, term = periodic.measure_fit(sigs[i], trials, base, chosen,
+                                                        current.fit, window, threads)
+            if i == todo[0] and refit is not None:
+                beside = (chosen + (term,), refit)
+        # structure along the actuator index, beside the strongest periodic torque: the
+        # residual's bins are too coarse for it (:mod:`.actuator`)
+        say("testing one force factor per actuator")
+        by_actuator = actuator.measure(trials, base, beside[0], beside[1], window, threads)
+        if by_actuator is not None:
+            sig, factors_fit = by_actuator
+            # the strongest periodic torque was refitted beside the factors: it may only be
+            # their shadow (their first harmonic), so it is sized again from that fit
+            if len(beside[0]) > len(chosen):
+                sigs[todo[0]] = periodic.sized(sigs[todo[0]], factors_fit,
+                                               periodic.frequency(sigs[todo[0]], base), base)
+            sigs[:] = [s for s in sigs if s.axis != "actuator"] + [sig]
+        # a periodic signature that its refit does not confirm (95 % interval reaching 0, or
+        # smaller than the reporting floor) is set apart, not reported as unexplained
+        ident.unconfirmed = [s for s in sigs if not periodic.confirmed(s)]
+        sigs[:] = [s for s in sigs if periodic.confirmed(s)]
         # a library effect of the same shape that was refused as a stand-in tells how the
         # structure goes with speed, which the signature alone does not
         for sig in sigs:
@@ -768,7 +790,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
 
 
 #: Unexplained periodic signatures sized by a refit (:mod:`.periodic`), strongest first.
-MEASURED_SIGNATURES = 2
+MEASURED_SIGNATURES = 3
 
 
 def effect_wald_p(fit: FitResult, effect: Candidate) -> float:
