@@ -74,6 +74,8 @@ def main() -> None:
             print(f"  refused: {'+'.join(ev.effects)}: {ev.reason}")
         for sig in ident.diagnostics_after.signatures:
             print(f"  unexplained: {sig.text}")
+        for sig in ident.unconfirmed:
+            print(f"  unconfirmed (p = {sig.p_value:.1e}): {sig.text}")
 
 
 if __name__ == "__main__":

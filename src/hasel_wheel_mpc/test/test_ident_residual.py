@@ -211,11 +211,33 @@ def test_without_a_drift_the_scans_keep_one_level_per_trial_and_slow_periods(win
     assert np.linalg.norm(left1) > 0.5 * np.linalg.norm(drift - drift.mean())
 
 
-def test_a_period_its_refit_does_not_confirm_is_set_apart():
-    from hasel_wheel_mpc.ident.periodic import confirmed
-    sig = R.Signature("wheel_angle", "rad", 2 * math.pi, 0.02, 0.0007, 1e-9, "periodic")
+def test_a_period_is_confirmed_by_its_refits_wald_test_against_the_closed_form():
+    from hasel_wheel_mpc.ident.fit import FitResult
+    from hasel_wheel_mpc.ident.periodic import confirmed, sized
+    from hasel_wheel_sim.params import WheelParams
+    base = WheelParams()
+    sig = R.Signature("wheel_angle", "rad", 2 * math.pi, 0.02, 0.0007, 1e-9,
+                      "periodic in wheel angle with period 6.283 rad, amplitude 0.02 rad/s^2")
     assert confirmed(sig)                                   # sized from the residual alone
-    sized = dataclasses.replace(sig, torque_ci95=(0.0005, 0.0009))
-    assert confirmed(sized)
-    assert not confirmed(dataclasses.replace(sized, torque_ci95=(0.0, 0.0009)))  # reaches 0
-    assert not confirmed(dataclasses.replace(sized, amplitude=0.5 * R.MIN_AMPLITUDE))
+
+    def refit(p, q, sd):
+        return FitResult(["P_sig", "Q_sig"], ["N*m", "N*m"], np.array([p, q]),
+                         np.array([p, q]), np.diag([sd * sd, sd * sd]), 1e-3, {}, 10, True,
+                         "", 1.0, values={"P_sig": p, "Q_sig": q})
+
+    # 2 dof: chi^2 = (P^2 + Q^2) / sd^2, p = exp(-chi^2 / 2)
+    for p, q, sd in ((0.003, 0.004, 0.001), (0.0003, 0.0004, 0.0001), (0.0002, 0.0, 0.0001)):
+        out = sized(sig, refit(p, q, sd), 1.0, base)
+        chi2 = (p * p + q * q) / (sd * sd)
+        assert out.p_value == pytest.approx(math.exp(-chi2 / 2), rel=1e-9)
+        assert out.torque == pytest.approx(math.hypot(p, q))
+        assert out.amplitude == pytest.approx(math.hypot(p, q) / base.inertia)
+        assert out.torque_ci95 == pytest.approx((max(math.hypot(p, q) - 1.96 * sd, 0.0),
+                                                 math.hypot(p, q) + 1.96 * sd))
+    # confirmed only when significant (p < 1e-6) and above the reporting floor
+    big = sized(sig, refit(0.003, 0.004, 0.001), 1.0, base)         # chi^2 25, p 3.7e-6
+    assert not confirmed(big)
+    clear = sized(sig, refit(0.003, 0.004, 0.0005), 1.0, base)      # chi^2 100
+    assert clear.amplitude >= R.MIN_AMPLITUDE and confirmed(clear)
+    tiny = sized(sig, refit(0.00003, 0.00004, 0.000001), 1.0, base)  # significant, tiny
+    assert tiny.p_value < 1e-100 and tiny.amplitude < R.MIN_AMPLITUDE and not confirmed(tiny)

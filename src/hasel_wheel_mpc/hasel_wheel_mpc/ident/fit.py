@@ -636,3 +636,24 @@ def autocorrelation_inflation(r: np.ndarray, starts: np.ndarray, used: np.ndarra
         return 1.0
     rho = num[1:] / num[0]
     return float(max(1.0 + 2.0 * np.sum(rho), 1.0))
+
+
+def wald_p(fit: FitResult, effect: Candidate) -> float:
+    """p-value of "this effect is absent" from the fit's covariance."""
+    names = [p.name for p in effect.params]
+    idx = [fit.names.index(nm) for nm in names]
+    x = fit.theta[idx]
+    null = np.array([_null_value(effect, nm) for nm in names])
+    C = fit.cov[np.ix_(idx, idx)]
+    try:
+        chi2 = float((x - null) @ np.linalg.solve(C, x - null))
+    except np.linalg.LinAlgError:
+        return 1.0
+    return float(stats.chi2.sf(chi2, len(idx)))
+
+
+def _null_value(effect: Candidate, name: str) -> float:
+    """The parameter value at which the effect vanishes."""
+    if effect.id == "charge_retention":
+        return 0.0 if name == "rate" else math.nan
+    return 0.0

@@ -25,12 +25,10 @@ from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate, ParamSpec
 from .data import Trial
-from .fit import FitResult, Problem, force_coordinates
-from .residual import MIN_AMPLITUDE, Signature
-from .screen import screen
+from .fit import FitResult, wald_p
+from .residual import MIN_AMPLITUDE, SIGNIFICANCE, Signature
+from .screen import screened_refit
 
-#: Evaluations of the sizing refit (it starts near its optimum; see :func:`measure`).
-MAX_EVALUATIONS = 30
 #: Signature axes whose period this module can turn into a frequency along xi1.
 ANGLE_AXES = ("wheel_angle", "pivot_angle", "wheel_angle_unwrapped")
 
@@ -59,53 +57,40 @@ def periodic_torque(k: float) -> Candidate:
 
 
 def confirmed(sig: Signature) -> bool:
-    """False for a signature sized by a refit (:func:`measure`) whose 95 % interval reaches
-    0 or whose amplitude is under :data:`~.residual.MIN_AMPLITUDE`: the model refitted with
-    that torque does not need it.  (Seen beside a drift: a 40 ms rise lag with its candidate
-    left out, 5 x 60 s, plant seed 11, ad hoc, had the residual's periodograms name periods
-    of 3.83 and 2.63 per wheel turn; refitted, 0.0032 and 0.0003 rad/s^2, the second's
+    """False for a signature sized by a refit (:func:`sized`) whose Wald test does not reach
+    :data:`~.residual.SIGNIFICANCE` or whose amplitude is under
+    :data:`~.residual.MIN_AMPLITUDE`: the model refitted with that torque does not need it.
+    (Seen beside a drift: a 40 ms rise lag with its candidate left out, 5 x 60 s, plant seed
+    11, ad hoc, had the residual's periodograms name periods of 3.83, 2.63 and 2.08 per
+    wheel turn; refitted, 0.0032 and 0.0003 rad/s^2 for the first two, the second's 95 %
     interval from 0.)  True for every other signature."""
     if sig.torque_ci95 is None:
         return True
-    return sig.torque_ci95[0] > 0.0 and sig.amplitude >= MIN_AMPLITUDE
+    return sig.p_value < SIGNIFICANCE and sig.amplitude >= MIN_AMPLITUDE
 
 
 def measure(sig: Signature, trials: list[Trial], base: WheelParams,
             effects: tuple[Candidate, ...], fit: FitResult, window: float = 1.0,
-            threads: int = 2) -> Signature:
-    """``sig`` with its amplitude [rad/s^2] and torque [N*m] from a refit of the model
-    (nominal + ``effects``, fitted as ``fit``) plus :func:`periodic_torque` at its period;
-    ``sig`` unchanged when it is not periodic along an angle or the model already has a
-    pivot-lap term."""
-    return measure_fit(sig, trials, base, effects, fit, window, threads)[0]
-
-
-def measure_fit(sig: Signature, trials: list[Trial], base: WheelParams,
-                effects: tuple[Candidate, ...], fit: FitResult, window: float = 1.0,
-                threads: int = 2) -> tuple[Signature, FitResult | None, Candidate | None]:
-    """:func:`measure`, with the refit and the torque term it added (None, None when there
-    was none), so that further structure can be looked for beside this one."""
+            threads: int = 2) -> tuple[Signature, FitResult | None, Candidate | None]:
+    """(``sig`` sized by a refit of the model (nominal + ``effects``, fitted as ``fit``) plus
+    :func:`periodic_torque` at its period (:func:`sized`), that refit, the torque term); or
+    (``sig``, None, None) unchanged when it is not periodic along an angle or the model
+    already has a pivot-lap term.  The refit starts where the score test's step predicts
+    the lower error (:func:`~.screen.screened_refit`): from the refitted model the torque
+    crept, 0.0033 N*m of 0.004 after 10 evaluations and 0.00396 after 100, while from the
+    reference force law 10 gave 0.00401."""
     k = frequency(sig, base)
     if k is None or any(c.id == "platform_periodic" for c in effects):
         return sig, None, None
     term = periodic_torque(k)
-    # start where the screening's Gauss-Newton step predicts the lower error: from the
-    # fitted model, or from the reference force law (a model that bent its force law to
-    # take up the torque sits far from where the law and the torque together are best; from
-    # there the refit crept, 0.0033 N*m of 0.004 after 10 evaluations and 0.00396 after 100,
-    # while from the reference law 10 gave 0.00401)
-    current = Problem(trials, base, tuple(effects), window)
-    reference = dict(force_coordinates(base), tau_f=fit.values.get("tau_f", base.tau_f))
-    start = screen(trials, base, tuple(effects), fit, current, term, window, reference).start
-    problem = Problem(trials, base, tuple(effects) + (term,), window, threads=threads)
-    res = problem.fit(start=start, x0=fit.z[fit.theta.size:].reshape(-1, 2),
-                      max_nfev=MAX_EVALUATIONS)
+    _, res = screened_refit(trials, base, tuple(effects), fit, term, window, threads)
     return sized(sig, res, k, base), res, term
 
 
 def sized(sig: Signature, res: FitResult, k: float, base: WheelParams) -> Signature:
     """``sig`` sized by ``res``, a fit of a model with :func:`periodic_torque` ``(k)`` in it:
-    amplitude [rad/s^2], torque [N*m] with its 95 % interval, and phase [rad]."""
+    amplitude [rad/s^2], torque [N*m] with its 95 % interval, phase [rad], and as its
+    p-value the Wald test's of "P = Q = 0" in that fit (2 dof)."""
     p, q = res.values["P_sig"], res.values["Q_sig"]
     torque = math.hypot(p, q)
     # 95 % interval of the amplitude from the fit's covariance (delta method)
@@ -120,5 +105,6 @@ def sized(sig: Signature, res: FitResult, k: float, base: WheelParams) -> Signat
             f"phase {math.atan2(q, p):.3g} rad; fitted with the model as a torque "
             f"P sin(k xi1) + Q cos(k xi1), k = {k:.4g}/rad)")
     return dataclasses.replace(sig, amplitude=torque / inertia, torque=torque, text=text,
+                               p_value=wald_p(res, periodic_torque(k)),
                                phase=math.atan2(q, p),
                                torque_ci95=(max(torque - half, 0.0), torque + half))

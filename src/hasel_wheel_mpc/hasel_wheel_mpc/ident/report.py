@@ -39,27 +39,29 @@ tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_ra
                             (select.tied_pair); [] when none
 unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p_value,
                             text, phase_rad, torque_ci95_N_m, actuator_factors}] structure
-                            left in the final model's residual; [] when none.  A signature periodic in an
-                            angle is sized by a refit of a torque at its period
-                            (ident/periodic.py): torque_N_m * sin(2 pi x / period +
-                            phase_rad) along its axis x, with a 95 % interval; phase_rad
-                            and torque_ci95_N_m are null where it is sized from the
-                            residual alone.  Axis "time", "hv_time" or "speed" with
+                            left in the final model's residual; [] when none.  A
+                            signature periodic in an angle is sized by a refit of a
+                            torque at its period (ident/periodic.py):
+                            torque_N_m * sin(2 pi x / period + phase_rad) along its
+                            axis x, with a 95 % interval, and p_value is that refit's
+                            Wald test of "no torque"; phase_rad and torque_ci95_N_m are
+                            null where it is sized from the residual alone.  Axis "time", "hv_time" or "speed" with
                             period null: a drift during the drive (residual.drive_trend);
                             amplitude_rad_s2 is half the fitted curve's largest range
                             within a trial.  Axis "actuator": one force factor per
                             actuator, sized by a refit (ident/actuator.py), listed in
                             actuator_factors [1] (actuators 0..15, geometric mean 1);
                             null for every other axis.
-unconfirmed                [{axis, period, amplitude_rad_s2, text}] periods the residual's
-                            periodograms showed that their refit did not confirm
-                            (periodic.confirmed: 95 % interval reaching 0, or under the
-                            reporting floor); not structure the model leaves; [] when none
                             Axis "autocorrelation" (unit s, period null):
                             a residual that is not white while no axis shows structure;
                             amplitude_rad_s2 is the constant acceleration error per window
                             that leaves as much correlated residual
                             (residual.autocorrelation_signature)
+unconfirmed                [{axis, period, amplitude_rad_s2, p_value, torque_ci95_N_m,
+                            text}] periods the residual's periodograms showed that their
+                            refit did not confirm (periodic.confirmed: the refit's Wald p
+                            of "no torque" not under 1e-6, or under the reporting floor);
+                            not structure the model leaves; [] when none
 metrics                    {before: M, after: M}, M = {window_rmse_rad, heldout_window_rmse_rad,
                             simulation: {pooled_fitted_rmse_rad_s, pooled_heldout_rmse_rad_s,
                             per_trial: {name: {fitted: T, heldout: T}}}},
@@ -261,8 +263,10 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
              "actuator_factors": None if s.factors is None else [_num(v) for v in s.factors]}
             for s in after.signatures],
         "unconfirmed": [{"axis": s.axis, "period": _num(s.period),
-                         "amplitude_rad_s2": _num(s.amplitude), "text": s.text}
-                        for s in getattr(ident, "unconfirmed", [])],
+                         "amplitude_rad_s2": _num(s.amplitude), "p_value": _num(s.p_value),
+                         "torque_ci95_N_m": None if s.torque_ci95 is None else
+                         [_num(v) for v in s.torque_ci95], "text": s.text}
+                        for s in ident.unconfirmed],
         "metrics": {"before": dict(_metrics(ident.nominal),
                                    prediction=_prediction(ident.prediction_before)),
                     "after": dict(_metrics(ident.final),
@@ -360,8 +364,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
         L += ["No significant structure is left in the residual.", ""]
     if data["unconfirmed"]:
         L += ["Periods the residual's periodograms showed but a refit with a torque at that "
-              "period did not confirm (its 95 % interval reaches 0, or it is under the "
-              "reporting floor):", ""]
+              "period did not confirm (its Wald p not under 1e-6, or under the reporting "
+              "floor):", ""]
         L += [f"* {u['text']}" for u in data["unconfirmed"]] + [""]
     if data["left_out_effects"]:
         L += [f"Not carried into `model.yaml` (the plant and the MPC have no such field): "

@@ -389,7 +389,7 @@ def driven_windows(problem: Problem, wins: np.ndarray) -> np.ndarray:
 def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
                 wins: np.ndarray, trial_of: np.ndarray) -> Trend | None:
     """A steady change of the window defects ``a`` (m,) [rad/s^2] (of windows ``wins``, in
-    trials ``trial_of``) during the drive, and the defects with it taken out.
+    trials ``trial_of``) during the drive, or None.
 
     An effect that grows or fades as the wheel is driven (force lost to retained charge, to a
     slower rise at higher speed, to a sagging supply) leaves the nominal fit a defect that
@@ -605,8 +605,8 @@ def trend_signature(tr: Trend, inertia: float) -> Signature:
     text = (f"drifts during each drive: the unmodelled acceleration changes along "
             f"{label[tr.axis]}, +-{tr.amplitude:.3g} rad/s^2 ({tr.amplitude * inertia:.2g} N*m) "
             f"over the drives (a line and a bend), p = {tr.p_value:.1e}; its straight part "
-            f"{what} by {tr.slope:+.3g} rad/s^2 per {tr.unit} ({tr.slope * inertia:+.2g} N*m "
-            f"per {tr.unit})")
+            f"{what} by {abs(tr.slope):.3g} rad/s^2 per {tr.unit} "
+            f"({abs(tr.slope) * inertia:.2g} N*m per {tr.unit})")
     others = [f"{label[k]} p = {tr.p_values[k]:.1e} (r = {c:+.2f} with it within the trials)"
               for k, c in tr.correlations.items()]
     if others:

@@ -53,7 +53,7 @@ from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate
 from .data import Trial
-from .fit import FitResult, ParameterError, Problem
+from .fit import FitResult, ParameterError, Problem, force_coordinates
 from .threads import with_one_blas_thread
 
 
@@ -178,3 +178,27 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
                      float(stats.chi2.sf(statistic, candidate.size)),
                      float(stats.chi2.logsf(statistic, candidate.size) / math.log(10.0)),
                      math.sqrt(max(sse, 0.0) / n_used), start, scanned)
+
+
+#: Evaluations of a sizing refit started from a score test's step (:func:`screened_refit`).
+SIZING_EVALUATIONS = 30
+
+
+def screened_refit(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
+                   fit: FitResult, term: Candidate, window: float = 1.0, threads: int = 2,
+                   significance: float = 1.0) -> tuple[Screening, FitResult | None]:
+    """``term`` added to the model (nominal + ``effects``, fitted as ``fit``): its score test
+    (:func:`screen`, from the fit and from the reference force law), and, when that test's p
+    is under ``significance``, a short refit (:data:`SIZING_EVALUATIONS`) from its step with
+    the window starts of ``fit``; None in its place otherwise.  For measuring terms that
+    describe unexplained structure (:mod:`.periodic`, :mod:`.actuator`): a model that bent
+    its force law to take up the structure sits far from where the law and the term together
+    are best, and from there a refit creeps."""
+    current = Problem(trials, base, tuple(effects), window)
+    reference = dict(force_coordinates(base), tau_f=fit.values.get("tau_f", base.tau_f))
+    sc = screen(trials, base, tuple(effects), fit, current, term, window, reference)
+    if not sc.p_value < significance:
+        return sc, None
+    problem = Problem(trials, base, tuple(effects) + (term,), window, threads=threads)
+    return sc, problem.fit(start=sc.start, x0=fit.z[fit.theta.size:].reshape(-1, 2),
+                           max_nfev=SIZING_EVALUATIONS)

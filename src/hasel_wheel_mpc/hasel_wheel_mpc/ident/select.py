@@ -120,11 +120,12 @@ from hasel_wheel_sim.params import WheelParams
 from .candidates import BY_ID, LIBRARY, Candidate
 from .consistency import Consistency, stand_in_reason, trial_consistency
 from .data import Trial
-from .fit import FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates
+from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates,
+                  wald_p)
 from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
-from .residual import TREND_AXES, Diagnostics, Signature, analyse
+from .residual import TREND_AXES, Diagnostics, Signature, analyse, autocorrelation_signature
 from .screen import SCREEN_P, Screening, screen
 from .threads import with_one_blas_thread
 
@@ -424,20 +425,6 @@ def refit_order(scores: list[Screening], rmse: float, min_gain: float = 0.10,
     return promising, rivals
 
 
-def wald_p(fit: FitResult, effect: Candidate) -> float:
-    """p-value of "this effect is absent" from the fit's covariance."""
-    names = [p.name for p in effect.params]
-    idx = [fit.names.index(nm) for nm in names]
-    x = fit.theta[idx]
-    null = np.array([_null_value(effect, nm) for nm in names])
-    C = fit.cov[np.ix_(idx, idx)]
-    try:
-        chi2 = float((x - null) @ np.linalg.solve(C, x - null))
-    except np.linalg.LinAlgError:
-        return 1.0
-    return float(stats.chi2.sf(chi2, len(idx)))
-
-
 def implausibility(fit: FitResult, added: tuple[Candidate, ...]) -> str | None:
     """Why the fitted values of ``added`` do not look like the physics they name, or None."""
     for c in added:
@@ -526,13 +513,6 @@ def judge(ev: Evaluation, added: tuple[Candidate, ...], current: Evaluation, min
                      f"{1e3 * current.heldout_rmse:.3f} ({100 * gain:+.1f} %, need > 0);"
                      f" Wald p = {ev.wald_p:.1e} (need < 1e-6)"
                      + (f"; refused: {odd}" if odd else ""))
-
-
-def _null_value(effect: Candidate, name: str) -> float:
-    """The parameter value at which the effect vanishes."""
-    if effect.id == "charge_retention":
-        return 0.0 if name == "rate" else math.nan
-    return 0.0
 
 
 @with_one_blas_thread
@@ -746,20 +726,15 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 ident.prediction_after[tr.name] = prediction_residual(tr, params, ext)
             ident.diagnostics_before, ident.diagnostics_after = before.result(), after.result()
         # what is left unexplained and periodic in an angle: sized by a refit (the residual
-        # alone shows only what the fit did not already absorb), the two strongest
-        sigs = ident.diagnostics_after.signatures
-        for sig in sigs:
-            if sig.axis == "autocorrelation" or (sig.period is None and sig.axis in TREND_AXES
-                                                 and sig.text.startswith("drifts")):
-                # no axis shows it, or only as a drift: the free run shows it trial by trial
-                sig.text += ("; the free run's steady-state speed error (simulated minus "
-                             "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
+        # alone shows only what the fit did not already absorb), the strongest first
+        diag = ident.diagnostics_after
+        sigs = diag.signatures
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
         beside: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
         for i in todo:
             say(f"sizing the unexplained signature: {sigs[i].text}")
-            sigs[i], refit, term = periodic.measure_fit(sigs[i], trials, base, chosen,
-                                                        current.fit, window, threads)
+            sigs[i], refit, term = periodic.measure(sigs[i], trials, base, chosen, current.fit,
+                                                    window, threads)
             if i == todo[0] and refit is not None:
                 beside = (chosen + (term,), refit)
         # structure along the actuator index, beside the strongest periodic torque: the
@@ -773,11 +748,23 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             if len(beside[0]) > len(chosen):
                 sigs[todo[0]] = periodic.sized(sigs[todo[0]], factors_fit,
                                                periodic.frequency(sigs[todo[0]], base), base)
-            sigs[:] = [s for s in sigs if s.axis != "actuator"] + [sig]
-        # a periodic signature that its refit does not confirm (95 % interval reaching 0, or
-        # smaller than the reporting floor) is set apart, not reported as unexplained
+            # it replaces the binned actuator axis, and a residual "correlated while no axis
+            # shows structure" no longer applies
+            sigs[:] = [s for s in sigs if s.axis not in ("actuator", "autocorrelation")] + [sig]
+        # a periodic signature that its refit does not confirm (:func:`periodic.confirmed`) is
+        # set apart, not reported as unexplained; if nothing is left, the residual may still
+        # be correlated
         ident.unconfirmed = [s for s in sigs if not periodic.confirmed(s)]
         sigs[:] = [s for s in sigs if periodic.confirmed(s)]
+        if not sigs:
+            correlated = autocorrelation_signature(diag, base.inertia)
+            sigs += [correlated] if correlated is not None else []
+        for sig in sigs:
+            if sig.axis == "autocorrelation" or (sig.period is None and sig.axis in TREND_AXES
+                                                 and sig.text.startswith("drifts")):
+                # no axis shows it, or only as a drift: the free run shows it trial by trial
+                sig.text += ("; the free run's steady-state speed error (simulated minus "
+                             "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
         # a library effect of the same shape that was refused as a stand-in tells how the
         # structure goes with speed, which the signature alone does not
         for sig in sigs:
