@@ -360,55 +360,59 @@ def test_a_gain_spread_outside_the_library_is_reported_along_the_actuator_index(
     assert [u["axis"] for u in data["unconfirmed"]] == ["wheel_angle"]
 
 
-@pytest.mark.parametrize("effect, excluded, axes", [
+def _retention(rate: float) -> dict:
+    return {"charge_retention": {"enabled": True, "rate": {"value": rate, "unit": "1/s"},
+                                 "recovery": {"value": 300.0, "unit": "s"}}}
+
+
+@pytest.mark.parametrize("effect, excluded, axes, apart", [
     ({"rise_lag": {"enabled": True, "time_constant": {"value": 0.04, "unit": "s"}}},
-     "rise_lag", ("speed",)),
-    ({"charge_retention": {"enabled": True, "rate": {"value": 0.2, "unit": "1/s"},
-                           "recovery": {"value": 300.0, "unit": "s"}}},
-     "charge_retention", ("hv_time", "time")),
+     "rise_lag", ("speed",), 1e6),
+    (_retention(0.2), "charge_retention", ("hv_time", "time"), 1e6),
+    # weaker retention: speed is 4e3 times less likely than HV time (ad hoc, p 9e-54
+    # against 2e-57); before the refit beside the HV-time loss a rise lag was named here
+    (_retention(0.05), "charge_retention", ("hv_time", "time"), 1e3),
 ])
 def test_look_alike_losses_outside_the_library_drift_along_their_own_axis(effect, excluded,
-                                                                         axes):
+                                                                         axes, apart):
     # a rise lag and charge retention both weaken the force as a drive goes on, the one with
     # the speed, the other with the HV time.  On the paper's protocol (5 x 60 s; 50 s drives
     # in which the speed levels off while the HV time keeps growing), with either left out of
     # the library, the other is not named in its place (refused as a stand-in, or not
     # supported), and the drift left over follows the right axis: speed for the rise lag,
-    # HV time (or the time since the trial's start, which rises with it) for retention.  On
-    # 3 x 34 s the two are named for each other (the next test)
+    # HV time (or the time since the trial's start, which rises with it) for retention.
+    # Nothing else is reported: the periods of 2-4 per wheel turn that the periodograms show
+    # beside the drift are set apart by their refits (with the HV-time loss beside them
+    # for retention: without it one was confirmed), and no force factor per actuator holds
     res = SEL.identify(_trials(effect, seed=11, specs=S.PAPER_SET), k_folds=5,
                        library=C.library(exclude=[excluded]))
     assert res.chosen == ()
     trend = res.diagnostics_after.trend
     assert trend is not None and trend.axis in axes and trend.p_value < 1e-20
     other = {"speed"} if "time" in axes else {"time", "hv_time"}
-    assert all(trend.p_values[k] > 1e6 * trend.p_values[trend.axis] for k in other)
+    assert all(trend.p_values[k] > apart * trend.p_values[trend.axis] for k in other)
     sigs = res.diagnostics_after.signatures
-    assert [s.axis for s in sigs if s.period is None] == [trend.axis]
-    if excluded == "rise_lag":
-        # the periods of 2-4 per wheel turn the periodograms also show are not confirmed
-        # by their refits, and are set apart
-        assert len(sigs) == 1 and res.unconfirmed
-    # (with retention of 0.2/s, whether the periods the periodograms show beside the drift
-    # are confirmed is not asserted: see the README)
+    assert [s.axis for s in sigs] == [trend.axis]
 
 
-def test_a_rise_lag_standing_in_for_charge_retention_is_named_with_a_caution():
-    # retention of 0.2/s with its candidate left out (plant seed 11): a rise lag and a gain
-    # spread are named (a wrong name: both weaken the force, and speed and HV time rise
-    # together through every drive), but refitted on the halves of each drive the rise lag
-    # is slower in the second half of every trial, and the report says so
-    retention = {"charge_retention": {"enabled": True, "rate": {"value": 0.2, "unit": "1/s"},
-                                      "recovery": {"value": 300.0, "unit": "s"}}}
-    res = SEL.identify(_trials(retention, seed=11), k_folds=3,
+def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measured_loss():
+    # retention of 0.2/s with its candidate left out, 3 x 34 s (plant seed 11): a rise lag
+    # cuts the held-out error (0.088 -> 0.056 rad/s, ad hoc) and was named, with a caution.
+    # Refitted on the halves of each drive it is slower in the second half of every trial;
+    # refitted beside a force loss that grows with HV time it is no longer needed, so it is
+    # refused, nothing is named, and the drift it took up is reported with that refusal
+    res = SEL.identify(_trials(_retention(0.2), seed=11), k_folds=3,
                        library=C.library(exclude=["charge_retention"]))
-    assert "rise_lag" in res.chosen
-    con = res.consistency["rise_lag"]
-    assert np.all(con.halves[:, 1] > con.halves[:, 0]) and con.drift_p < 1e-6
-    effects = {e["id"]: e for e in to_json(res, [], [])["effects"]}
-    caution = effects["rise_lag"]["consistency"]["caution"]
-    assert "rise_lag is not the same throughout a trial" in caution
-    assert effects["rise_lag"]["consistency"]["drift_exponent"] > 0.05
+    assert res.chosen == ()
+    refused = [e for r in res.rounds for e in r if e.effects == ("rise_lag",)]
+    assert refused and not refused[0].accepted
+    why = refused[0].reason
+    assert "rise_lag changes within the trials" in why and "no longer holds" in why
+    drift = [s for s in res.diagnostics_after.signatures if SEL.drift_signature(s)]
+    assert len(drift) == 1 and "rise_lag took up part of it and was refused" in drift[0].text
+    data = to_json(res, [], [])
+    assert data["effects"] == [] and any("rise_lag took up part" in u["text"]
+                                         for u in data["unexplained"])
 
 
 def test_on_data_without_an_effect_nothing_is_added():

@@ -55,7 +55,7 @@ from hasel_wheel_sim.params import WheelParams
 
 from .candidates import Candidate
 from .data import Trial, bridged_angle
-from .fit import Problem
+from .fit import FitResult, Problem
 from .simulate import free_run
 from .threads import run_split
 
@@ -192,6 +192,16 @@ def trial_metrics(problem: Problem, theta: np.ndarray, trial: Trial,
     span = float(np.ptp(v_meas))
     return TrialMetrics(trial.name, rmse, 1.0 - sse / ss_tot if ss_tot > 0 else math.nan,
                         rmse / span if span > 0 else math.nan, ess, n)
+
+
+def fitted_metrics(problem: Problem, fit: FitResult, trials: list[Trial]
+                   ) -> dict[str, TrialMetrics]:
+    """The simulation error of each of ``trials`` (the trials ``problem`` was built on, in
+    its order) with the parameters of ``fit`` (a fit of ``problem`` on all of them), each
+    trial run from its first window's fitted start; keyed by trial name."""
+    x = problem.window_starts(fit.z)
+    return {tr.name: trial_metrics(problem, fit.theta, tr, x[problem.trial_windows[i][0]])
+            for i, tr in enumerate(trials)}
 
 
 def pooled_rmse(metrics: dict[str, TrialMetrics]) -> float:

@@ -118,12 +118,13 @@ from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import BY_ID, LIBRARY, Candidate
-from .consistency import Consistency, stand_in_reason, trial_consistency
+from .consistency import HV_LOSS, MAX_NFEV as CONSISTENCY_NFEV, Consistency, drift_stand_in, \
+    stand_in_reason, trial_consistency
 from .data import Trial
 from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates,
                   wald_p)
 from . import actuator, periodic
-from .metrics import TrialMetrics, drift_text, pooled_rmse, trial_metrics
+from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
 from .residual import TREND_AXES, Diagnostics, Signature, analyse, autocorrelation_signature
 from .screen import SCREEN_P, Screening, screen
@@ -248,11 +249,8 @@ def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, .
     # run side by side, one thread each
     problem = Problem(trials, base, effects, window, threads=threads)
     full = problem.fit(start=start, x0=x0, max_nfev=max_nfev)
-    x_full = problem.window_starts(full.z)
     ev = Evaluation(tuple(c.id for c in effects), full, full.rmse, dict(full.per_trial_rmse))
-    for i, tr in enumerate(trials):
-        ev.sim_fitted[tr.name] = trial_metrics(problem, full.theta, tr,
-                                               x_full[problem.trial_windows[i][0]])
+    ev.sim_fitted = fitted_metrics(problem, full, trials)
     if len(trials) < 2 or (cv_below is not None and full.rmse > cv_below) or \
             (sim_below is not None and pooled_rmse(ev.sim_fitted) >= sim_below) or \
             (refuse is not None and refuse(full) is not None):
@@ -554,13 +552,16 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     restarted = False
     refused: dict[bytes, str | None] = {}
     stand_ins: dict[str, tuple[Candidate, str]] = {}    # id -> (candidate, why a stand-in)
+    within: dict[str, str] = {}     # id -> refused as a stand-in for a change within trials
     # (the fit's packed vector, effect id) -> the effect refitted trial by trial
     checked: dict[tuple[bytes, str], Consistency] = {}
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
         """Why the values of ``added`` in the fit ``f`` cannot be the effect they name:
-        implausible values, or a size that trends with the trials' speed (once per fit)."""
+        implausible values, a size that trends with the trials' speed, or a size that
+        changes within the trials and does not hold beside a measured change (once per
+        fit; :mod:`.consistency`)."""
         key = f.z.tobytes() + ("+".join(c.id for c in effects) + "|"
                                + "+".join(c.id for c in added)).encode()
         if key not in refused:
@@ -572,6 +573,12 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                     why = stand_in_reason(c, con)
                     if why is not None:
                         stand_ins[c.id] = (c, why)
+                        break
+                    why = drift_stand_in(trials, base, effects, f, c, con, min_gain, window,
+                                         threads)
+                    if why is not None:
+                        within[c.id] = (f"{c.id} took up part of it and was refused, "
+                                        f"{con.beside_text(min_gain)}")
                         break
             refused[key] = why
         return refused[key]
@@ -729,14 +736,25 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # alone shows only what the fit did not already absorb), the strongest first
         diag = ident.diagnostics_after
         sigs = diag.signatures
+        # an unexplained drift is measured beside them: a force factor per actuator or a
+        # periodic torque would otherwise take up part of it (:data:`~.consistency.HV_LOSS`)
+        measuring: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
+        if any(drift_signature(s) for s in sigs) and \
+                not any(c.id == "charge_retention" for c in chosen):
+            say("refitting with a force loss growing with HV time beside the unexplained "
+                "drift (a measuring device)")
+            problem = Problem(trials, base, chosen + (HV_LOSS,), window, threads=threads)
+            measuring = (chosen + (HV_LOSS,),
+                         problem.fit(start=current.fit.values, max_nfev=CONSISTENCY_NFEV,
+                                     x0=current.fit.z[len(current.fit.names):].reshape(-1, 2)))
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
-        beside: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
+        beside = measuring
         for i in todo:
             say(f"sizing the unexplained signature: {sigs[i].text}")
-            sigs[i], refit, term = periodic.measure(sigs[i], trials, base, chosen, current.fit,
+            sigs[i], refit, term = periodic.measure(sigs[i], trials, base, *measuring,
                                                     window, threads)
             if i == todo[0] and refit is not None:
-                beside = (chosen + (term,), refit)
+                beside = (measuring[0] + (term,), refit)
         # structure along the actuator index, beside the strongest periodic torque: the
         # residual's bins are too coarse for it (:mod:`.actuator`)
         say("testing one force factor per actuator")
@@ -760,8 +778,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             correlated = autocorrelation_signature(diag, base.inertia)
             sigs += [correlated] if correlated is not None else []
         for sig in sigs:
-            if sig.axis == "autocorrelation" or (sig.period is None and sig.axis in TREND_AXES
-                                                 and sig.text.startswith("drifts")):
+            if sig.axis == "autocorrelation" or drift_signature(sig):
                 # no axis shows it, or only as a drift: the free run shows it trial by trial
                 sig.text += ("; the free run's steady-state speed error (simulated minus "
                              "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
@@ -773,7 +790,18 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 if (c.axis == sig.axis and c not in chosen and sig.period is not None
                         and abs(sig.period / (2 * math.pi) - 1.0) < 0.02):
                     sig.text += f"; refitted to it, {why}"
+            if drift_signature(sig):
+                # what the drift is not: the library's effects that took it up in part
+                for cid, why in within.items():
+                    if cid not in ident.chosen:
+                        sig.text += f"; {why}"
     return ident
+
+
+def drift_signature(sig: Signature) -> bool:
+    """Whether ``sig`` is a drift during the drives along one of the trend axes (time, HV
+    time, speed; :func:`~.residual.drive_trend`)."""
+    return sig.period is None and sig.axis in TREND_AXES and sig.text.startswith("drifts")
 
 
 #: Unexplained periodic signatures sized by a refit (:mod:`.periodic`), strongest first.
