@@ -236,8 +236,8 @@ def run_outside_library() -> None:
     of std 0.1 (3 x 34 s, plant seed 11; reported along the actuator index, ident/actuator.py:
     its factors against the plant's gains), and the look-alike losses on the paper's
     protocol (5 x 60 s, plant seeds 11-13): a 40 ms rise lag and charge retention of 0.2/s
-    (each should leave a drift along its own axis, nothing named), retention of 0.05/s
-    (seed 11)."""
+    and 0.05/s (each should leave a drift along its own axis, nothing named); and the first
+    two on 3 x 34 s (seeds 11-13), where they are harder to tell apart."""
     spread = {"gain_spread": {"enabled": True, "std": {"value": 0.1, "unit": "1"}}}
     trials, res, dt, _ = _identify_short(spread, seed=11,
                                          library=C.library(exclude=["gain_spread"]), analyse=True)
@@ -263,28 +263,33 @@ def run_outside_library() -> None:
             "retention 0.05/s": ({"charge_retention": {"enabled": True,
                                                        "rate": {"value": 0.05, "unit": "1/s"},
                                                        "recovery": {"value": 300.0, "unit": "s"}}},
-                                 "charge_retention", (11,))}
-    for label, (effect, cid, seeds) in look.items():
-        for seed in seeds:
-            trials = S.record_set(S.PAPER_SET, config=PlantConfig(
-                seed=seed, switching="tick", effects=effects_from_mapping({**ENCODER, **effect})))
-            t0 = time.perf_counter()
-            res = SEL.identify(trials, k_folds=5, library=C.library(exclude=[cid]))
-            dt = time.perf_counter() - t0
-            tr = res.diagnostics_after.trend
-            drift = ("no drift" if tr is None else
-                     f"drift along {tr.axis} (p = {tr.p_value:.1e}; "
-                     + ", ".join(f"{k} {v:.1e}" for k, v in tr.p_values.items() if k != tr.axis)
-                     + ")")
-            cautions = [f"{i}: h = {c.drift:+.2f} +- {c.drift_sd:.2f} (p = {c.drift_p:.1e})"
-                        for i, c in res.consistency.items()]
-            others = [f"{s.axis} {s.period:.3g}" for s in res.diagnostics_after.signatures
-                      if s.period is not None]
-            print(f"{label} outside the library, 5 x 60 s, seed {seed}: chosen "
-                  f"{res.chosen or 'none'} ({'; '.join(cautions) or 'no checks'}); held-out "
-                  f"simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
-                  f"{res.final.sim_heldout_rmse:.4f} rad/s; {drift}; periodic signatures "
-                  f"{others or 'none'}; unconfirmed {len(res.unconfirmed)}; {dt:.0f} s")
+                                 "charge_retention", (11, 12, 13))}
+    runs = [(label, effect, cid, seed, S.PAPER_SET) for label, (effect, cid, seeds) in look.items()
+            for seed in seeds]
+    runs += [(label, look[label][0], look[label][1], seed, S.SHORT_SET)
+             for label in ("rise lag 40 ms", "retention 0.2/s") for seed in (11, 12, 13)]
+    for label, effect, cid, seed, specs in runs:
+        trials = S.record_set(specs, config=PlantConfig(
+            seed=seed, switching="tick", effects=effects_from_mapping({**ENCODER, **effect})))
+        t0 = time.perf_counter()
+        res = SEL.identify(trials, k_folds=5 if specs is S.PAPER_SET else 3,
+                           library=C.library(exclude=[cid]))
+        dt = time.perf_counter() - t0
+        tr = res.diagnostics_after.trend
+        drift = ("no drift" if tr is None else
+                 f"drift along {tr.axis} (p = {tr.p_value:.1e}; "
+                 + ", ".join(f"{k} {v:.1e}" for k, v in tr.p_values.items() if k != tr.axis)
+                 + ")")
+        cautions = [f"{i}: h = {c.drift:+.2f} +- {c.drift_sd:.2f} (p = {c.drift_p:.1e})"
+                    for i, c in res.consistency.items()]
+        others = [f"{s.axis} {s.period:.3g}" if s.period is not None else s.axis
+                  for s in res.diagnostics_after.signatures if not SEL.drift_signature(s)]
+        print(f"{label} outside the library, {len(specs)} x {specs[0].drive + specs[0].coast:.0f}"
+              f" s, seed {seed}: chosen "
+              f"{res.chosen or 'none'} ({'; '.join(cautions) or 'no checks'}); held-out "
+              f"simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
+              f"{res.final.sim_heldout_rmse:.4f} rad/s; {drift}; other signatures "
+              f"{others or 'none'}; unconfirmed {len(res.unconfirmed)}; {dt:.0f} s")
 
 
 def run_restarted() -> None:

@@ -749,12 +749,14 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                                      x0=current.fit.z[len(current.fit.names):].reshape(-1, 2)))
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
         beside = measuring
+        torque_beside = False          # the strongest periodic torque is beside the factors
         for i in todo:
             say(f"sizing the unexplained signature: {sigs[i].text}")
             sigs[i], refit, term = periodic.measure(sigs[i], trials, base, *measuring,
                                                     window, threads)
             if i == todo[0] and refit is not None:
                 beside = (measuring[0] + (term,), refit)
+                torque_beside = True
         # structure along the actuator index, beside the strongest periodic torque: the
         # residual's bins are too coarse for it (:mod:`.actuator`)
         say("testing one force factor per actuator")
@@ -763,7 +765,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             sig, factors_fit = by_actuator
             # the strongest periodic torque was refitted beside the factors: it may only be
             # their shadow (their first harmonic), so it is sized again from that fit
-            if len(beside[0]) > len(chosen):
+            if torque_beside:
                 sigs[todo[0]] = periodic.sized(sigs[todo[0]], factors_fit,
                                                periodic.frequency(sigs[todo[0]], base), base)
             # it replaces the binned actuator axis, and a residual "correlated while no axis
