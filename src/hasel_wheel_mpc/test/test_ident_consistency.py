@@ -8,6 +8,7 @@ from scipy import stats
 
 from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import consistency as K
+from hasel_wheel_mpc.ident import report
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.fit import Problem, coastdown_friction
 from hasel_wheel_sim.params import WheelParams
@@ -196,6 +197,10 @@ def test_a_right_effect_that_drifts_beside_a_missing_loss_keeps_its_hold():
     e1, e0 = con.beside_sim
     assert e1 < 0.8 * e0
     assert "it still holds" in K.drift_caution(C.BY_ID["viscous_drag"], con)
+    # and report.json carries the refit beside the device
+    beside = report._consistency(C.BY_ID["viscous_drag"], con)["beside_hv_loss"]
+    assert beside == {"rate_per_s": con.beside_rate, "wald_p": con.beside_p,
+                      "sim_rmse_rad_s": e1, "sim_rmse_without_rad_s": e0}
 
 
 def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():

@@ -538,6 +538,7 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     # checks are reported, without a caution
     k = on_disk["effects"][0]["consistency"]
     assert k["caution"] is None and k["speed_trend_p"] > 1e-3 and k["drift_p"] > 1e-3
+    assert k["beside_hv_loss"] is None            # it does not drift: not refitted beside
     assert abs(k["speed_exponent"]) < 0.5 and abs(k["drift_exponent"]) < 0.05
     params, ext = load_model(tmp_path / on_disk["model_file"])
     assert ext.com_torque == pytest.approx(0.004, rel=0.05)

@@ -19,12 +19,17 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             for the chosen ones (wald_p: "absent" in the final model);
                             consistency: {speed_exponent, speed_exponent_sd,
                             speed_trend_p, drift_exponent, drift_exponent_sd, drift_p,
-                            caution} the effect refitted trial by trial (size ~ speed^k)
-                            and on the halves of each drive (size ~ hv^h), as checked when
-                            it was added (ident/consistency.py); caution is a sentence
-                            when it changes within the trials, else null; an exponent and
-                            its p are null where they cannot be formed; null when not
-                            checked
+                            beside_hv_loss, caution} the effect refitted trial by trial
+                            (size ~ speed^k) and on the halves of each drive (size ~
+                            hv^h), as checked when it was added (ident/consistency.py);
+                            caution is a sentence when it changes within the trials,
+                            else null; an exponent and its p are null where they cannot
+                            be formed; beside_hv_loss {rate_per_s, wald_p,
+                            sim_rmse_rad_s, sim_rmse_without_rad_s}: a drifting effect
+                            refitted beside a force loss growing with HV time (the
+                            device's rate, the effect's Wald p there, the free run on all
+                            trials with it and without it), null when not refitted; null
+                            when not checked
 candidates                 [{round, id, score_statistic, score_dof, score_p,
                             predicted_window_rmse_rad, refitted, converged (null: not
                             refitted), window_rmse_rad,
@@ -293,6 +298,11 @@ def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
             "drift_exponent": _num(con.drift) if drift else None,
             "drift_exponent_sd": _num(con.drift_sd),
             "drift_p": _num(con.drift_p) if drift else None,
+            "beside_hv_loss": ({"rate_per_s": _num(con.beside_rate),
+                                "wald_p": _num(con.beside_p),
+                                "sim_rmse_rad_s": _num(con.beside_sim[0]),
+                                "sim_rmse_without_rad_s": _num(con.beside_sim[1])}
+                               if math.isfinite(con.beside_p) else None),
             "caution": drift_caution(c, con)}
 
 
