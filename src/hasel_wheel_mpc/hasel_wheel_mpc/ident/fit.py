@@ -165,6 +165,11 @@ class FitResult:
     values: dict[str, float] = field(default_factory=dict)
     ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
 
+    @property
+    def x0(self) -> np.ndarray:
+        """(w, 2) the fitted start of each window: xi1 [rad], xi2 [rad/s]."""
+        return self.z[self.theta.size:].reshape(-1, 2)
+
 
 class Problem:
     """Multiple-shooting least squares over a set of trials (see the module docstring).

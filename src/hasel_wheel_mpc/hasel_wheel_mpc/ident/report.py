@@ -24,12 +24,13 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             hv^h), as checked when it was added (ident/consistency.py);
                             caution is a sentence when it changes within the trials,
                             else null; an exponent and its p are null where they cannot
-                            be formed; beside_hv_loss {rate_per_s, wald_p,
+                            be formed; beside_hv_loss {rate_per_s, values, wald_p,
                             sim_rmse_rad_s, sim_rmse_without_rad_s}: a drifting effect
                             refitted beside a force loss growing with HV time (the
-                            device's rate, the effect's Wald p there, the free run on all
-                            trials with it and without it), null when not refitted; null
-                            when not checked
+                            device's rate, the effect's own parameters there by name in
+                            their units, its Wald p there, the free run on all trials
+                            with it and without it), null when not refitted; null when
+                            not checked
 candidates                 [{round, id, score_statistic, score_dof, score_p,
                             predicted_window_rmse_rad, refitted, converged (null: not
                             refitted), window_rmse_rad,
@@ -299,6 +300,7 @@ def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
             "drift_exponent_sd": _num(con.drift_sd),
             "drift_p": _num(con.drift_p) if drift else None,
             "beside_hv_loss": ({"rate_per_s": _num(con.beside_rate),
+                                "values": {k: _num(v) for k, v in con.beside_values.items()},
                                 "wald_p": _num(con.beside_p),
                                 "sim_rmse_rad_s": _num(con.beside_sim[0]),
                                 "sim_rmse_without_rad_s": _num(con.beside_sim[1])}

@@ -200,5 +200,5 @@ def screened_refit(trials: list[Trial], base: WheelParams, effects: tuple[Candid
     if not sc.p_value < significance:
         return sc, None
     problem = Problem(trials, base, tuple(effects) + (term,), window, threads=threads)
-    return sc, problem.fit(start=sc.start, x0=fit.z[fit.theta.size:].reshape(-1, 2),
+    return sc, problem.fit(start=sc.start, x0=fit.x0,
                            max_nfev=SIZING_EVALUATIONS)

@@ -46,9 +46,13 @@ Search (forward selection).  Starting from the nominal model:
      off-centre mass standing in for an angle sensor's reading error grows as about
      speed^2, a reading error standing in for an off-centre mass falls as speed^-3.
      Refitted on the first and the second half of each drive as well, an effect that
-     changes within the trials is reported with a caution, not refused: a rise lag standing
-     in for charge retention is slower in the second halves, but a right drag that takes
-     up part of a missing retention grows there too (:mod:`.consistency`).
+     changes within the trials is refitted once more beside a force loss that grows with
+     the accumulated HV time (a measuring device, :data:`~.consistency.HV_LOSS`): a rise
+     lag standing in for charge retention is slower in the second halves and no longer
+     holds beside the device, so it is refused; a right drag that takes up part of a
+     missing retention grows there too, but holds, and is kept with a caution
+     (:func:`~.consistency.drift_stand_in`).  When the model has a retention already, or
+     the effect is retention, no such refit runs and a drift is only a caution.
      Checked on the fit on all trials of every refit, so a stand-in is refused before its
      folds, and is not "backed" (no second start, no pair).
 
@@ -118,8 +122,8 @@ from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import BY_ID, LIBRARY, Candidate
-from .consistency import HV_LOSS, MAX_NFEV as CONSISTENCY_NFEV, Consistency, drift_stand_in, \
-    stand_in_reason, trial_consistency
+from .consistency import (HV_LOSS, Consistency, beside_loss, can_measure_beside,
+                          drift_stand_in, stand_in_reason, trial_consistency)
 from .data import Trial
 from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates,
                   wald_p)
@@ -552,7 +556,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     restarted = False
     refused: dict[bytes, str | None] = {}
     stand_ins: dict[str, tuple[Candidate, str]] = {}    # id -> (candidate, why a stand-in)
-    within: dict[str, str] = {}     # id -> refused as a stand-in for a change within trials
+    # (the fit's packed vector, effect id) -> why refused as a stand-in for a change within
+    # the trials
+    within: dict[tuple[bytes, str], str] = {}
     # (the fit's packed vector, effect id) -> the effect refitted trial by trial
     checked: dict[tuple[bytes, str], Consistency] = {}
 
@@ -577,8 +583,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                     why = drift_stand_in(trials, base, effects, f, c, con, min_gain, window,
                                          threads)
                     if why is not None:
-                        within[c.id] = (f"{c.id} took up part of it and was refused, "
-                                        f"{con.beside_text(min_gain)}")
+                        within[(f.z.tobytes(), c.id)] = (f"{c.id} took up part of it and was "
+                                                         f"refused, "
+                                                         f"{con.beside_text(min_gain)}")
                         break
             refused[key] = why
         return refused[key]
@@ -693,7 +700,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                           if k not in {p.name for i in best.effects[len(chosen):]
                                        for p in BY_ID[i].params}},
                          folds, threads, refuse=lambda f: "a check, not cross-validated",
-                         x0=best.fit.z[len(best.fit.names):].reshape(-1, 2), max_nfev=30)
+                         x0=best.fit.x0, max_nfev=30)
         why = optimum_not_effect(current, best, check, min_gain)
         if why is not None:
             best.accepted = False
@@ -703,7 +710,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 break
             restarted = True
             current = evaluate(trials, base, chosen, window, dict(check.fit.values), folds,
-                               threads, x0=check.fit.z[len(check.fit.names):].reshape(-1, 2))
+                               threads, x0=check.fit.x0)
             current.accepted = True
             current.reason = ("+".join(c.id for c in chosen) or "nominal model") + \
                 " (refitted from a better optimum)"
@@ -739,14 +746,11 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # an unexplained drift is measured beside them: a force factor per actuator or a
         # periodic torque would otherwise take up part of it (:data:`~.consistency.HV_LOSS`)
         measuring: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
-        if any(drift_signature(s) for s in sigs) and \
-                not any(c.id == "charge_retention" for c in chosen):
+        if any(drift_signature(s) for s in sigs) and can_measure_beside(chosen):
             say("refitting with a force loss growing with HV time beside the unexplained "
                 "drift (a measuring device)")
-            problem = Problem(trials, base, chosen + (HV_LOSS,), window, threads=threads)
             measuring = (chosen + (HV_LOSS,),
-                         problem.fit(start=current.fit.values, max_nfev=CONSISTENCY_NFEV,
-                                     x0=current.fit.z[len(current.fit.names):].reshape(-1, 2)))
+                         beside_loss(trials, base, chosen, current.fit, window, threads)[1])
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
         beside = measuring
         torque_beside = False          # the strongest periodic torque is beside the factors
@@ -771,6 +775,14 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             # it replaces the binned actuator axis, and a residual "correlated while no axis
             # shows structure" no longer applies
             sigs[:] = [s for s in sigs if s.axis not in ("actuator", "autocorrelation")] + [sig]
+        if len(measuring[0]) > len(chosen):
+            # sized beside the HV-time loss: say so
+            for sig in sigs:
+                if sig.torque_ci95 is not None or sig.factors is not None:
+                    sig.text += ("; sized with a force loss growing with the accumulated HV "
+                                 "time beside it (rate "
+                                 f"{measuring[1].values[HV_LOSS.params[0].name]:.3g}/s), "
+                                 "a measuring device for the unexplained drift")
         # a periodic signature that its refit does not confirm (:func:`periodic.confirmed`) is
         # set apart, not reported as unexplained; if nothing is left, the residual may still
         # be correlated
@@ -793,10 +805,15 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                         and abs(sig.period / (2 * math.pi) - 1.0) < 0.02):
                     sig.text += f"; refitted to it, {why}"
             if drift_signature(sig):
-                # what the drift is not: the library's effects that took it up in part
-                for cid, why in within.items():
-                    if cid not in ident.chosen:
-                        sig.text += f"; {why}"
+                # what the drift is not: the library's effects that took it up in part, as
+                # refused in the refits the search kept (one note per effect)
+                noted = set()
+                for ev in (e for r in ident.rounds for e in r if not e.accepted):
+                    for cid in ev.effects:
+                        why = within.get((ev.fit.z.tobytes(), cid))
+                        if why is not None and cid not in ident.chosen and cid not in noted:
+                            noted.add(cid)
+                            sig.text += f"; {why}"
     return ident
 
 
