@@ -428,6 +428,14 @@ def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measu
     assert "rise_lag changes within the trials" in why and "no longer holds" in why
     drift = [s for s in res.diagnostics_after.signatures if SEL.drift_signature(s)]
     assert len(drift) == 1 and "rise_lag took up part of it and was refused" in drift[0].text
+    # and how much of it a loss with HV time takes up: the device's rate is the plant's
+    text = drift[0].text.split("with a force loss growing with the accumulated HV time "
+                               "beside the model")[1]
+    rate = float(text.split("rate ")[1].split("/s")[0])
+    assert rate == pytest.approx(0.2, rel=0.1)
+    found = re.search(r"free run on all trials is ([0-9.]+) rad/s against ([0-9.]+)", text)
+    with_device, without = float(found[1]), float(found[2])
+    assert with_device < 0.6 * without
     data = to_json(res, [], [])
     assert data["effects"] == [] and any("rise_lag took up part" in u["text"]
                                          for u in data["unexplained"])

@@ -749,8 +749,19 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         if any(drift_signature(s) for s in sigs) and can_measure_beside(chosen):
             say("refitting with a force loss growing with HV time beside the unexplained "
                 "drift (a measuring device)")
-            measuring = (chosen + (HV_LOSS,),
-                         beside_loss(trials, base, chosen, current.fit, window, threads)[1])
+            problem, device_fit = beside_loss(trials, base, chosen, current.fit, window,
+                                              threads)
+            measuring = (chosen + (HV_LOSS,), device_fit)
+            # how much of the drift a loss with HV time takes up: a description, not a name
+            rate = device_fit.values[HV_LOSS.params[0].name]
+            with_device = pooled_rmse(fitted_metrics(problem, device_fit, trials))
+            for sig in sigs:
+                if drift_signature(sig):
+                    sig.text += (f"; with a force loss growing with the accumulated HV time "
+                                 f"beside the model (a measuring device, never named), rate "
+                                 f"{rate:.3g}/s (Wald p {wald_p(device_fit, HV_LOSS):.1e}), the "
+                                 f"free run on all trials is {with_device:.4f} rad/s against "
+                                 f"{pooled_rmse(current.sim_fitted):.4f}")
         todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
         beside = measuring
         torque_beside = False          # the strongest periodic torque is beside the factors
