@@ -284,12 +284,17 @@ def run_outside_library() -> None:
                     for i, c in res.consistency.items()]
         others = [f"{s.axis} {s.period:.3g}" if s.period is not None else s.axis
                   for s in res.diagnostics_after.signatures if not SEL.drift_signature(s)]
+        # the look-alikes refused beside the HV-time loss (consistency.drift_stand_in)
+        beside = ["+".join(e.effects) + " " + e.reason[e.reason.index("refitted beside"):
+                                                        e.reason.index(": there")]
+                  for r in res.rounds for e in r if ": there it no longer holds" in e.reason]
         print(f"{label} outside the library, {len(specs)} x {specs[0].drive + specs[0].coast:.0f}"
               f" s, seed {seed}: chosen "
               f"{res.chosen or 'none'} ({'; '.join(cautions) or 'no checks'}); held-out "
               f"simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
               f"{res.final.sim_heldout_rmse:.4f} rad/s; {drift}; other signatures "
-              f"{others or 'none'}; unconfirmed {len(res.unconfirmed)}; {dt:.0f} s")
+              f"{others or 'none'}; unconfirmed {len(res.unconfirmed)}"
+              + "".join(f"; refused {b}" for b in beside) + f"; {dt:.0f} s")
 
 
 def run_restarted() -> None:

@@ -188,7 +188,8 @@ def test_a_drifting_stand_in_loses_its_hold_beside_the_measured_loss():
 def test_a_right_effect_that_drifts_beside_a_missing_loss_keeps_its_hold():
     # the right drag with retention of 0.2/s missing takes up part of the loss and drifts
     # within the trials (size ~ hv^0.3); beside the device it comes back to the plant's
-    # 1e-3 N*m*s/rad, stays significant, and still runs the trials far better: kept
+    # 1e-3 N*m*s/rad, stays significant, and still runs the trials better by the rule's
+    # margin (half of min_gain): kept
     con, why = _beside({**RETENTION, **DRAG}, "viscous_drag")
     assert con.drift > 0.1
     assert why is None
@@ -196,7 +197,7 @@ def test_a_right_effect_that_drifts_beside_a_missing_loss_keeps_its_hold():
     assert con.beside_values["c"] == pytest.approx(1e-3, rel=0.1)
     assert con.beside_p < 1e-20
     e1, e0 = con.beside_sim
-    assert e1 < 0.8 * e0
+    assert 1.0 - e1 / e0 >= 0.05
     assert "it still holds" in K.drift_caution(C.BY_ID["viscous_drag"], con)
     # and report.json carries the refit beside the device
     beside = report._consistency(C.BY_ID["viscous_drag"], con)["beside_hv_loss"]

@@ -369,9 +369,10 @@ def _retention(rate: float) -> dict:
     ({"rise_lag": {"enabled": True, "time_constant": {"value": 0.04, "unit": "s"}}},
      "rise_lag", ("speed",), 1e6),
     (_retention(0.2), "charge_retention", ("hv_time", "time"), 1e6),
-    # weaker retention: speed is 4e3 times less likely than HV time (ad hoc, p 9e-54
-    # against 2e-57); before the refit beside the HV-time loss a rise lag was named here
-    (_retention(0.05), "charge_retention", ("hv_time", "time"), 1e3),
+    # weaker retention: speed is closer behind HV time (10^2.8 to 10^6.3 times less likely
+    # over seeds 11-13, bench_ident_effects.py --outside-only), so only an order of
+    # magnitude is asked; before the refit beside the HV-time loss a rise lag was named here
+    (_retention(0.05), "charge_retention", ("hv_time", "time"), 10.0),
 ])
 def test_look_alike_losses_outside_the_library_drift_along_their_own_axis(effect, excluded,
                                                                          axes, apart):
@@ -428,14 +429,20 @@ def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measu
     assert "rise_lag changes within the trials" in why and "no longer holds" in why
     drift = [s for s in res.diagnostics_after.signatures if SEL.drift_signature(s)]
     assert len(drift) == 1 and "rise_lag took up part of it and was refused" in drift[0].text
-    # and how much of it a loss with HV time takes up: the device's rate is the plant's
+    # and how much of it a loss with HV time takes up: the device has retention's form
+    # (its 300 s recovery hardly acts in 34 s), so it takes the plant's rate, and the free
+    # run with it comes near the true model's (the plant's own parameters)
     text = drift[0].text.split("with a force loss growing with the accumulated HV time "
                                "beside the model")[1]
     rate = float(text.split("rate ")[1].split("/s")[0])
     assert rate == pytest.approx(0.2, rel=0.1)
     found = re.search(r"free run on all trials is ([0-9.]+) rad/s against ([0-9.]+)", text)
     with_device, without = float(found[1]), float(found[2])
-    assert with_device < 0.6 * without
+    base = WheelParams()
+    truth = model_error(res.trials, base, (C.BY_ID["charge_retention"],),
+                        dict(force_coordinates(base), tau_f=base.tau_f, rate=0.2,
+                             recovery=300.0))
+    assert with_device < 1.25 * truth < without
     data = to_json(res, [], [])
     assert data["effects"] == [] and any("rise_lag took up part" in u["text"]
                                          for u in data["unexplained"])

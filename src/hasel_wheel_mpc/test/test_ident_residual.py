@@ -1,6 +1,5 @@
 """Whiteness of the residual: the mean autocorrelation against its closed form, and the
 signature a correlated residual gets when no axis shows structure (ident/residual.py)."""
-import dataclasses
 import math
 import re
 

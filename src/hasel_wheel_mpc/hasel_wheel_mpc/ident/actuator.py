@@ -28,7 +28,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
 
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import acceleration, contact_at_switch_on

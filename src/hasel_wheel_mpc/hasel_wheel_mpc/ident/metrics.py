@@ -199,7 +199,7 @@ def fitted_metrics(problem: Problem, fit: FitResult, trials: list[Trial]
     """The simulation error of each of ``trials`` (the trials ``problem`` was built on, in
     its order) with the parameters of ``fit`` (a fit of ``problem`` on all of them), each
     trial run from its first window's fitted start; keyed by trial name."""
-    x = problem.window_starts(fit.z)
+    x = fit.x0
     return {tr.name: trial_metrics(problem, fit.theta, tr, x[problem.trial_windows[i][0]])
             for i, tr in enumerate(trials)}
 
