@@ -240,3 +240,22 @@ def test_hv_time_counts_each_actuators_own_on_time():
     gained = np.where(pad[:10] == 0, 0.5, 0.2)
     expected = np.concatenate([first + k * gained for k in range(3)])
     assert D.hv_time(tr) == pytest.approx(expected, abs=1e-12)
+
+
+def test_a_glitch_in_the_tail_at_rest_does_not_keep_the_tail():
+    # the wheel stops during the coast; the samples at rest after it carry nothing and are
+    # trimmed.  One random count among them (a faulty encoder) must not end the rest there:
+    # the tail kept would leave a constant residual that correlates the whole fit's
+    cfg = PlantConfig(seed=2, switching="tick", effects=effects_from_mapping(ENCODER))
+    trial = S.record(S.SyntheticTrial(math.radians(3.0), drive=6.0, coast=14.0), config=cfg)
+    trimmed = F.at_rest_trimmed(trial)
+    end = trimmed.t.shape[0]
+    assert trial.t[-1] - trimmed.t[-1] > 1.0                # a second or more at rest
+    cols = _columns(trial)
+    k = end + (trial.t.shape[0] - end) // 2                  # halfway through the rest
+    cols["angle"][k] += 0.5
+    glitched = D.Trial("glitched", **cols)
+    assert F.at_rest_trimmed(glitched).t.shape[0] == end
+    # a reading in the tail more than a band away that lasts (the wheel moved) does end it
+    cols["angle"][k:k + 5] += 0.5
+    assert F.at_rest_trimmed(D.Trial("moved", **cols)).t.shape[0] >= k + 5

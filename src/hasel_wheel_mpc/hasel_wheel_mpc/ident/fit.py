@@ -608,12 +608,22 @@ def covariance(J: np.ndarray, scale: np.ndarray, s2: float, tol: float = 1e-10) 
 def at_rest_trimmed(tr: Trial, band: float = 0.015) -> Trial:
     """The trial without its tail at rest: from where the angle stays within ``band`` [rad]
     (two encoder counts plus noise) to the end.  A stopped wheel tells nothing about the
-    parameters, and the speed it starts a window with is not determined."""
-    rev = tr.angle[::-1]
+    parameters, and the speed it starts a window with is not determined.
+
+    The band is judged on the clean samples (:func:`~.data.clean_mask`): a glitched reading
+    in the tail (a random count, as a faulty encoder gives) would otherwise end the rest
+    early, and keep a tail of rest whose constant residual correlates the whole fit's
+    (a 0.2 % glitch rate raised the mean autocorrelation :func:`~.residual.analyse` reports
+    from 0.002 to 0.019 on clean 3 x 34 s data, plant seed 11, and so reported structure
+    where there was none)."""
+    clean = np.flatnonzero(clean_mask(tr.t, tr.angle))
+    rev = tr.angle[clean][::-1]
     spread = np.maximum.accumulate(rev) - np.minimum.accumulate(rev)
-    still = int(np.argmax(spread > band))        # samples at the end within the band
-    last = tr.t.shape[0] - still + 1
-    if still <= 1 or last >= tr.t.shape[0] or last < 30:
+    still = int(np.argmax(spread > band))        # clean samples at the end within the band
+    if still <= 1:
+        return tr
+    last = int(clean[clean.size - still]) + 1    # up to the first of them
+    if last >= tr.t.shape[0] or last < 30:
         return tr
     return tr.slice(0, last, tr.name)
 
