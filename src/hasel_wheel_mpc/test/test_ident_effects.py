@@ -444,7 +444,7 @@ def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measu
                              recovery=300.0))
     assert with_device < 1.25 * truth < without
     data = to_json(res, [], [])
-    assert data["effects"] == [] and any("rise_lag took up part" in u["text"]
+    assert data["effects"] == [] and any("rise_lag took up part" in u["text"] and u["drift"]
                                          for u in data["unexplained"])
 
 

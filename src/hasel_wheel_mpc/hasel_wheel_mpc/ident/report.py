@@ -44,15 +44,16 @@ tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_ra
                             other, refused, fitted the held-out windows as well
                             (select.tied_pair); [] when none
 unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p_value,
-                            text, phase_rad, torque_ci95_N_m, actuator_factors}] structure
+                            text, phase_rad, torque_ci95_N_m, actuator_factors, drift}] structure
                             left in the final model's residual; [] when none.  A
                             signature periodic in an angle is sized by a refit of a
                             torque at its period (ident/periodic.py):
                             torque_N_m * sin(2 pi x / period + phase_rad) along its
                             axis x, with a 95 % interval, and p_value is that refit's
                             Wald test of "no torque"; phase_rad and torque_ci95_N_m are
-                            null where it is sized from the residual alone.  Axis "time", "hv_time" or "speed" with
-                            period null: a drift during the drive (residual.drive_trend);
+                            null where it is sized from the residual alone.  drift
+                            true: a drift during the drive along axis "time", "hv_time"
+                            or "speed" (residual.drive_trend);
                             amplitude_rad_s2 is half the fitted curve's largest range
                             within a trial.  Axis "actuator": one force factor per
                             actuator, sized by a refit (ident/actuator.py), listed in
@@ -266,7 +267,8 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
              "p_value": _num(s.p_value), "text": s.text, "phase_rad": _num(s.phase),
              "torque_ci95_N_m": None if s.torque_ci95 is None else
              [_num(v) for v in s.torque_ci95],
-             "actuator_factors": None if s.factors is None else [_num(v) for v in s.factors]}
+             "actuator_factors": None if s.factors is None else [_num(v) for v in s.factors],
+             "drift": s.drift}
             for s in after.signatures],
         "unconfirmed": [{"axis": s.axis, "period": _num(s.period),
                          "amplitude_rad_s2": _num(s.amplitude), "p_value": _num(s.p_value),

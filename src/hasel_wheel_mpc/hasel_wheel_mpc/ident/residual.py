@@ -117,6 +117,8 @@ class Signature:
     #: for a signature along the actuator index sized by a refit (:mod:`.actuator`): the 16
     #: actuators' force factors [1] (their geometric mean 1).  None otherwise
     factors: tuple[float, ...] | None = None
+    #: True for a drift during the drives along a trend axis (:func:`trend_signature`)
+    drift: bool = False
 
 
 @dataclass
@@ -616,7 +618,7 @@ def trend_signature(tr: Trend, inertia: float) -> Signature:
         text += (f": {' and '.join(alike)} rose with it in these trials, so the data cannot "
                  f"tell which of them the change follows")
     return Signature(tr.axis, tr.unit, None, tr.amplitude, tr.amplitude * inertia,
-                     tr.p_value, text)
+                     tr.p_value, text, drift=True)
 
 
 def autocorrelation_signature(diag: Diagnostics, inertia: float) -> Signature | None:

@@ -130,7 +130,7 @@ from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, forc
 from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
-from .residual import TREND_AXES, Diagnostics, Signature, analyse, autocorrelation_signature
+from .residual import Diagnostics, Signature, analyse, autocorrelation_signature
 from .screen import SCREEN_P, Screening, screen
 from .threads import with_one_blas_thread
 
@@ -739,99 +739,113 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 ident.prediction_before[tr.name] = prediction_residual(tr, nominal.fit.params)
                 ident.prediction_after[tr.name] = prediction_residual(tr, params, ext)
             ident.diagnostics_before, ident.diagnostics_after = before.result(), after.result()
-        # what is left unexplained and periodic in an angle: sized by a refit (the residual
-        # alone shows only what the fit did not already absorb), the strongest first
-        diag = ident.diagnostics_after
-        sigs = diag.signatures
-        # an unexplained drift is measured beside them: a force factor per actuator or a
-        # periodic torque would otherwise take up part of it (:data:`~.consistency.HV_LOSS`)
-        measuring: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
-        if any(drift_signature(s) for s in sigs) and can_measure_beside(chosen):
-            say("refitting with a force loss growing with HV time beside the unexplained "
-                "drift (a measuring device)")
-            problem, device_fit = beside_loss(trials, base, chosen, current.fit, window,
-                                              threads)
-            measuring = (chosen + (HV_LOSS,), device_fit)
-            # how much of the drift a loss with HV time takes up: a description, not a name
-            rate = device_fit.values[HV_LOSS.params[0].name]
-            with_device = pooled_rmse(fitted_metrics(problem, device_fit, trials))
-            for sig in sigs:
-                if drift_signature(sig):
-                    sig.text += (f"; with a force loss growing with the accumulated HV time "
-                                 f"beside the model (a measuring device, never named), rate "
-                                 f"{rate:.3g}/s (Wald p {wald_p(device_fit, HV_LOSS):.1e}), the "
-                                 f"free run on all trials is {with_device:.4f} rad/s against "
-                                 f"{pooled_rmse(current.sim_fitted):.4f}")
-        todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
-        beside = measuring
-        torque_beside = False          # the strongest periodic torque is beside the factors
-        for i in todo:
-            say(f"sizing the unexplained signature: {sigs[i].text}")
-            sigs[i], refit, term = periodic.measure(sigs[i], trials, base, *measuring,
-                                                    window, threads)
-            if i == todo[0] and refit is not None:
-                beside = (measuring[0] + (term,), refit)
-                torque_beside = True
-        # structure along the actuator index, beside the strongest periodic torque: the
-        # residual's bins are too coarse for it (:mod:`.actuator`)
-        say("testing one force factor per actuator")
-        by_actuator = actuator.measure(trials, base, beside[0], beside[1], window, threads)
-        if by_actuator is not None:
-            sig, factors_fit = by_actuator
-            # the strongest periodic torque was refitted beside the factors: it may only be
-            # their shadow (their first harmonic), so it is sized again from that fit
-            if torque_beside:
-                sigs[todo[0]] = periodic.sized(sigs[todo[0]], factors_fit,
-                                               periodic.frequency(sigs[todo[0]], base), base)
-            # it replaces the binned actuator axis, and a residual "correlated while no axis
-            # shows structure" no longer applies
-            sigs[:] = [s for s in sigs if s.axis not in ("actuator", "autocorrelation")] + [sig]
-        if len(measuring[0]) > len(chosen):
-            # sized beside the HV-time loss: say so
-            for sig in sigs:
-                if sig.torque_ci95 is not None or sig.factors is not None:
-                    sig.text += ("; sized with a force loss growing with the accumulated HV "
-                                 "time beside it (rate "
-                                 f"{measuring[1].values[HV_LOSS.params[0].name]:.3g}/s), "
-                                 "a measuring device for the unexplained drift")
-        # a periodic signature that its refit does not confirm (:func:`periodic.confirmed`) is
-        # set apart, not reported as unexplained; if nothing is left, the residual may still
-        # be correlated
-        ident.unconfirmed = [s for s in sigs if not periodic.confirmed(s)]
-        sigs[:] = [s for s in sigs if periodic.confirmed(s)]
-        if not sigs:
-            correlated = autocorrelation_signature(diag, base.inertia)
-            sigs += [correlated] if correlated is not None else []
-        for sig in sigs:
-            if sig.axis == "autocorrelation" or drift_signature(sig):
-                # no axis shows it, or only as a drift: the free run shows it trial by trial
-                sig.text += ("; the free run's steady-state speed error (simulated minus "
-                             "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
-        # a library effect of the same shape that was refused as a stand-in tells how the
-        # structure goes with speed, which the signature alone does not
-        for sig in sigs:
-            for c, why in stand_ins.values():
-                # the library's periodic effects are once per turn (lap) of their axis
-                if (c.axis == sig.axis and c not in chosen and sig.period is not None
-                        and abs(sig.period / (2 * math.pi) - 1.0) < 0.02):
-                    sig.text += f"; refitted to it, {why}"
-            if drift_signature(sig):
-                # what the drift is not: the library's effects that took it up in part, as
-                # refused in the refits the search kept (one note per effect)
-                noted = set()
-                for ev in (e for r in ident.rounds for e in r if not e.accepted):
-                    for cid in ev.effects:
-                        why = within.get((ev.fit.z.tobytes(), cid))
-                        if why is not None and cid not in ident.chosen and cid not in noted:
-                            noted.add(cid)
-                            sig.text += f"; {why}"
+        _describe_unexplained(ident, chosen, current, stand_ins, within, say, threads)
     return ident
+
+
+def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
+                          current: Evaluation, stand_ins: dict[str, tuple[Candidate, str]],
+                          within: dict[tuple[bytes, str], str],
+                          say: Callable[[str], None], threads: int) -> None:
+    """Size and describe what the final model (``chosen``, fitted as ``current``) leaves
+    unexplained, in ``ident.diagnostics_after.signatures`` (changed in place; the periodic
+    signatures a refit does not confirm go to ``ident.unconfirmed``).  ``stand_ins`` (id ->
+    (candidate, why)) are the library effects refused as stand-ins for a trend with the
+    trials' speed, ``within`` ((fit bytes, id) -> note) those refused beside a measured
+    change within the trials: both say what a signature is not.  ``say`` reports progress."""
+    trials, base, window = ident.trials, ident.base, ident.window
+    # what is left unexplained and periodic in an angle: sized by a refit (the residual
+    # alone shows only what the fit did not already absorb), the strongest first
+    diag = ident.diagnostics_after
+    sigs = diag.signatures
+    # an unexplained drift is measured beside them: a force factor per actuator or a
+    # periodic torque would otherwise take up part of it (:data:`~.consistency.HV_LOSS`)
+    measuring: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
+    if any(drift_signature(s) for s in sigs) and can_measure_beside(chosen):
+        say("refitting with a force loss growing with HV time beside the unexplained "
+            "drift (a measuring device)")
+        problem, device_fit = beside_loss(trials, base, chosen, current.fit, window,
+                                          threads)
+        measuring = (chosen + (HV_LOSS,), device_fit)
+        # how much of the drift a loss with HV time takes up: a description, not a name
+        rate = device_fit.values[HV_LOSS.params[0].name]
+        with_device = pooled_rmse(fitted_metrics(problem, device_fit, trials))
+        for sig in sigs:
+            if drift_signature(sig):
+                sig.text += (f"; with a force loss growing with the accumulated HV time "
+                             f"beside the model (a measuring device, never named), rate "
+                             f"{rate:.3g}/s (Wald p {wald_p(device_fit, HV_LOSS):.1e}), the "
+                             f"free run on all trials is {with_device:.4f} rad/s against "
+                             f"{pooled_rmse(current.sim_fitted):.4f}")
+    todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
+    beside = measuring
+    torque_beside = False          # the strongest periodic torque is beside the factors
+    for i in todo:
+        say(f"sizing the unexplained signature: {sigs[i].text}")
+        sigs[i], refit, term = periodic.measure(sigs[i], trials, base, *measuring,
+                                                window, threads)
+        if i == todo[0] and refit is not None:
+            beside = (measuring[0] + (term,), refit)
+            torque_beside = True
+    # structure along the actuator index, beside the strongest periodic torque: the
+    # residual's bins are too coarse for it (:mod:`.actuator`)
+    say("testing one force factor per actuator")
+    by_actuator = actuator.measure(trials, base, beside[0], beside[1], window, threads)
+    if by_actuator is not None:
+        sig, factors_fit = by_actuator
+        # the strongest periodic torque was refitted beside the factors: it may only be
+        # their shadow (their first harmonic), so it is sized again from that fit
+        if torque_beside:
+            sigs[todo[0]] = periodic.sized(sigs[todo[0]], factors_fit,
+                                           periodic.frequency(sigs[todo[0]], base), base)
+        # it replaces the binned actuator axis, and a residual "correlated while no axis
+        # shows structure" no longer applies
+        sigs[:] = [s for s in sigs if s.axis not in ("actuator", "autocorrelation")] + [sig]
+    if len(measuring[0]) > len(chosen):
+        # sized beside the HV-time loss: say so
+        for sig in sigs:
+            if sig.torque_ci95 is not None or sig.factors is not None:
+                sig.text += ("; sized with a force loss growing with the accumulated HV "
+                             "time beside it (rate "
+                             f"{measuring[1].values[HV_LOSS.params[0].name]:.3g}/s), "
+                             "a measuring device for the unexplained drift")
+    # a periodic signature that its refit does not confirm (:func:`periodic.confirmed`) is
+    # set apart, not reported as unexplained; if nothing is left, the residual may still
+    # be correlated
+    ident.unconfirmed = [s for s in sigs if not periodic.confirmed(s)]
+    sigs[:] = [s for s in sigs if periodic.confirmed(s)]
+    if not sigs:
+        correlated = autocorrelation_signature(diag, base.inertia)
+        sigs += [correlated] if correlated is not None else []
+    for sig in sigs:
+        if sig.axis == "autocorrelation" or drift_signature(sig):
+            # no axis shows it, or only as a drift: the free run shows it trial by trial
+            sig.text += ("; the free run's steady-state speed error (simulated minus "
+                         "measured) trial by trial: " + drift_text(trials, current.sim_fitted))
+    # a library effect of the same shape that was refused as a stand-in tells how the
+    # structure goes with speed, which the signature alone does not
+    for sig in sigs:
+        for c, why in stand_ins.values():
+            # the library's periodic effects are once per turn (lap) of their axis
+            if (c.axis == sig.axis and c not in chosen and sig.period is not None
+                    and abs(sig.period / (2 * math.pi) - 1.0) < 0.02):
+                sig.text += f"; refitted to it, {why}"
+        if drift_signature(sig):
+            # what the drift is not: the library's effects that took it up in part, as
+            # refused in the refits the search kept (one note per effect)
+            noted = set()
+            for ev in (e for r in ident.rounds for e in r if not e.accepted):
+                for cid in ev.effects:
+                    why = within.get((ev.fit.z.tobytes(), cid))
+                    if why is not None and cid not in ident.chosen and cid not in noted:
+                        noted.add(cid)
+                        sig.text += f"; {why}"
 
 
 def drift_signature(sig: Signature) -> bool:
     """Whether ``sig`` is a drift during the drives along one of the trend axes (time, HV
     time, speed; :func:`~.residual.drive_trend`)."""
-    return sig.period is None and sig.axis in TREND_AXES and sig.text.startswith("drifts")
+    return sig.drift
 
 
 #: Unexplained periodic signatures sized by a refit (:mod:`.periodic`), strongest first.
