@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from hasel_wheel_mpc.ident import data as D
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import identifiability as I
 from hasel_wheel_mpc.ident import synthetic as S
@@ -122,3 +123,31 @@ def test_a_kept_span_weighs_only_its_samples_and_keeps_the_history_before_it(nom
     r_all, r_kept = everything.residual(z).copy(), kept.residual(z).copy()
     assert np.all(r_kept[~inside] == 0.0)
     assert np.array_equal(r_kept[inside], r_all[inside])
+
+
+def test_the_force_takes_each_activations_own_angle_not_the_rows(nominal_trials):
+    # a host logs its schedule when it sends it and the wheel's state when it arrives: with
+    # a link delay the schedule columns lead.  Here they lead by three rows, so the rows that
+    # end each activation already carry the next command's angles (after the priming pushes
+    # at 3 deg, phi_a 7 deg where the contact angle is still below it), and the rows after
+    # the drive have none.  The window fit at the true values must not change
+    tr = nominal_trials[2]
+    cols = {c: getattr(tr, c).copy() for c in ("t", "angle", "q", "eta", "n_a", "phi_a",
+                                                 "phi_d")}
+    for c in ("n_a", "phi_a", "phi_d"):
+        cols[c][:-3] = cols[c][3:]
+        cols[c][-3:] = -1 if c == "n_a" else math.nan
+    led = D.Trial(tr.name, **cols)
+    assert [(a.start, a.stop, a.eta, a.phi_a) for a in led.activations] == [
+        (a.start, a.stop, a.eta, a.phi_a) for a in tr.activations]
+    on = tr.q == 1
+    assert np.any(on & (np.nan_to_num(led.phi_a) != np.nan_to_num(tr.phi_a)))  # it is real
+    values = np.array([F.force_coordinates(TRUE)[n] for n in ("peak", "centre", "width", "b")]
+                      + [TRUE.tau_f])
+    rms = []
+    for t in (tr, led):
+        problem = F.Problem([t], TRUE)
+        _, r, _, _ = problem.solve_starts(problem.full_theta(values), problem.initial_starts())
+        rms.append(float(np.sqrt(np.mean(r[problem.ok] ** 2))))
+    assert rms[1] == rms[0]
+    np.testing.assert_array_equal(F.Problem([led], TRUE).phi_a, F.Problem([tr], TRUE).phi_a)

@@ -212,14 +212,24 @@ class Problem:
         self.trial_windows: list[range] = []
         for j, tr in enumerate(self.trials):
             m = tr.t.shape[0]
+            # each activation's own angle (:func:`~.data.find_activations`), not the row's:
+            # a host logs its schedule when it sends it, the wheel's state when it arrives,
+            # so with a link delay the rows at an activation's end can already carry the
+            # next command's angle (with 10 ms of telemetry delay, 5 x 60 s, plant seed 11,
+            # three rows of the last priming activation read phi_a 9 deg instead of 3 deg,
+            # its contact angle still below 9 deg: a braking force there bent the whole
+            # trial's fit, a 40 ms rise lag came out at 64 ms, and it was refused as a
+            # stand-in), and the rows after the schedule is cleared have none
             on_time = np.zeros(m)
+            phi_a = np.zeros(m)
             for act in tr.activations:
                 on_time[act.start:act.stop] = tr.t[act.start:act.stop] - tr.t[act.start]
+                phi_a[act.start:act.stop] = act.phi_a
             ts.append(tr.t)
             ys.append(tr.angle)
             qs.append(tr.q.astype(float))
             es.append(tr.eta_unwrapped.astype(float))
-            pas.append(np.where(tr.q == 1, np.nan_to_num(tr.phi_a), 0.0))
+            pas.append(phi_a)
             ots.append(on_time)
             ok = clean_mask(tr.t, tr.angle)
             if self.keep is not None:
