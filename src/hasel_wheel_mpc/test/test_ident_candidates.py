@@ -140,3 +140,19 @@ def test_a_gain_that_a_restart_of_the_current_model_also_reaches_is_not_the_effe
     why = optimum_not_effect(_sim((), 0.0387), _sim(("viscous_drag", "rise_lag"), 0.0288),
                              _sim((), 0.0280))
     assert why is not None and "not from viscous_drag+rise_lag" in why
+
+
+def test_a_refused_refit_that_shows_a_better_optimum_of_the_current_model_restarts_it():
+    from hasel_wheel_mpc.ident.select import poorer_optimum
+    current = _sim(("platform_periodic",), 0.1048)
+    refused = _sim(("platform_periodic", "gain_spread"), 0.0322)
+    # the current model refitted from where the refused refit ended runs the trials better
+    # by at least half of min_gain (5 %): it sat in a poorer optimum, and says which refit
+    why = poorer_optimum(current, refused, _sim(("platform_periodic",), 0.0303))
+    assert why is not None and "poorer optimum" in why and "without gain_spread" in why
+    assert poorer_optimum(current, refused, _sim(("platform_periodic",), 0.0995)) is not None
+    # under 5 % better, or worse: no restart
+    assert poorer_optimum(current, refused, _sim(("platform_periodic",), 0.0997)) is None
+    assert poorer_optimum(current, refused, _sim(("platform_periodic",), 0.2)) is None
+    # a refit that did not converge to a number says nothing
+    assert poorer_optimum(current, refused, _sim(("platform_periodic",), math.nan)) is None

@@ -102,10 +102,11 @@ is refitted from where the augmented fit ended (30 evaluations, no folds), and w
 refit simulates the trials better than the current fit did, the effect must still cut the
 error by half of ``min_gain`` against it (:func:`optimum_not_effect`).  If not, the effect is refused,
 the current model is replaced by that better optimum of itself (cross-validated again), and
-the search screens once more against it.  The same happens, once, when no refit is
-accepted but the one that fits the windows best, refused, ended where the current model
-alone simulates the trials better by half of ``min_gain`` (:func:`poorer_optimum`): a bent
-force law it left behind.  The best accepted candidate joins the model and the search
+the search screens once more against it.  The same happens when no refit is picked
+(none accepted, or a tie :func:`pick` will not break) but the refused one that the windows
+back best (:func:`backed`) ended where the current model alone simulates the trials better
+by half of ``min_gain`` (:func:`poorer_optimum`): a bent force law it left behind.  Either
+restart happens once per run.  The best accepted candidate joins the model and the search
 repeats, up to ``max_effects``.
 Whatever structure remains in the residual afterwards is reported as unexplained, with its
 signature (:mod:`.residual`).

@@ -2,10 +2,11 @@
 
 Two ways to switch the actuators:
 
-* **measured switching** (:func:`shoot_windows`): the actuator state (q, eta, phi_a) recorded at sample
-  k acts over [t_k, t_k+1).  The firmware switches on its 300 Hz ticks and reports the state it
-  switched to, so this reproduces it; the least-squares objective is smooth in the parameters,
-  which is what the fit needs.  The trial is cut into windows, each started from its own
+* **measured switching** (:func:`shoot_windows`): the actuator state (q, eta) recorded at
+  sample k acts over [t_k, t_k+1), with the angle phi_a of the activation it belongs to.
+  The firmware switches on its 300 Hz ticks and reports the state it switched to, so this
+  reproduces it; the least-squares objective is smooth in the parameters, which is what the
+  fit needs.  The trial is cut into windows, each started from its own
   (xi1, xi2) (multiple shooting), so an error in one place cannot poison the rest.
 * **model switching** (:func:`free_run`): the recorded sequence of activations (pad, phi_a,
   phi_d) is replayed, but each switches on and off when the *simulated* contact angle crosses
