@@ -253,9 +253,10 @@ def test_a_glitch_in_the_tail_at_rest_does_not_keep_the_tail():
     n = trial.t.shape[0]
     assert trial.t[-1] - trimmed.t[-1] > 1.0                # a second or more at rest
     k = end + (n - end) // 2                                 # halfway through the rest
-    # a count far off, and one in either of the last two samples (a glitch under 0.05 rad
-    # but over the band of 0.015 rad still ends the rest, a limit the docstring states)
-    for row, jump in ((k, 0.5), (n - 1, 0.5), (n - 2, -0.5)):
+    # a count far off, one just over the band of 0.015 rad (under the fit's glitch
+    # tolerance, 0.05), and one in either of the last two samples
+    for row, jump in ((k, 0.5), (k, 0.03), (k, -0.02), (n - 1, 0.5), (n - 2, -0.5),
+                      (n - 1, 0.02)):
         cols = _columns(trial)
         cols["angle"][row] += jump
         assert F.at_rest_trimmed(D.Trial("glitched", **cols)).t.shape[0] == end, (row, jump)
