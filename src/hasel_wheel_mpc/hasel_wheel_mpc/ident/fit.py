@@ -215,7 +215,7 @@ class Problem:
             # each activation's own angle (:func:`~.data.find_activations`), not the row's:
             # a host logs its schedule when it sends it, the wheel's state when it arrives,
             # so with a link delay the rows at an activation's end can already carry the
-            # next command's angle (with 10 ms of delay each way, 5 x 60 s, plant seed 11,
+            # next command's angle (ad hoc: 10 ms of delay each way, 5 x 60 s, plant seed 11,
             # three rows of the last priming activation read phi_a 9 deg instead of 3 deg,
             # its contact angle still below 9 deg: the braking force this gave bent the
             # whole trial's fit, a 40 ms rise lag came out at 64 ms in that trial alone and
@@ -628,8 +628,8 @@ def at_rest_trimmed(tr: Trial, band: float = 0.015) -> Trial:
     residual correlates the whole fit's (a 0.2 % glitch rate raised the mean autocorrelation
     :func:`~.residual.analyse` reports from 0.002 to 0.019 on clean 3 x 34 s data, plant seed
     11, and so reported structure where there was none).  A reading left out this way is
-    only left out of the band: on 65 plant trials (3 x 34 s and 5 x 60 s, plain and
-    realistic, five seeds) the trimming is the same as judged on every sample."""
+    only left out of the band: on 65 plant trials (ad hoc; 3 x 34 s and 5 x 60 s, plain
+    and realistic, five seeds) the trimming is the same as judged on every sample."""
     ok = clean_mask(tr.t, tr.angle, tol=band)
     if ok.shape[0] >= 3:
         ok[-1] = abs(tr.angle[-1] - np.median(tr.angle[-3:])) <= band
