@@ -14,7 +14,7 @@ from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import PlantConfig
 
-ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.001, "unit": "rad"}}}
+ENCODER = S.ENCODER
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from hasel_wheel_sim.model import param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import PlantConfig
 
-ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.001, "unit": "rad"}}}
+ENCODER = S.ENCODER
 TRUE = WheelParams()
 SET = tuple(S.SyntheticTrial(math.radians(a), drive=30.0, coast=9.0) for a in (1.0, 4.0, 7.0))
 

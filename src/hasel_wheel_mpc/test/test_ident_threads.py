@@ -13,7 +13,7 @@ from hasel_wheel_mpc.ident.threads import one_blas_thread
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.plant import PlantConfig
 
-ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.001, "unit": "rad"}}}
+ENCODER = S.ENCODER
 
 
 @pytest.fixture(scope="module")

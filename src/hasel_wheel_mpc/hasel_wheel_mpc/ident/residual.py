@@ -333,9 +333,7 @@ def scan_nuisance(problem: Problem, t_rel: np.ndarray, wins: np.ndarray,
     drift is a trend, not a period.  A quadratic takes up its shape, and with it part of a
     slow sinusoid: at worst 92 % of its variance at one cycle per drive, 43 % at 1.5, 15 %
     at 2 and 7 % at 3, hence the scan from :data:`MIN_CYCLES` then."""
-    st = problem.starts
-    lengths = np.diff(st)[wins].astype(float)
-    t = np.add.reduceat(t_rel, st[:-1])[wins] / lengths
+    t = window_means(problem, t_rel, wins)
     driven = driven_windows(problem, wins)
     cols = []
     for j in np.unique(trial_of):
@@ -358,8 +356,6 @@ def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarra
     2 pi f x (the averaging over a window is then modelled exactly, not ignored), fitted
     together with the nuisance columns D (m, k) (:func:`scan_nuisance`).  F test of the
     sinusoid against the nuisance alone."""
-    st = problem.starts
-    lengths = np.diff(st)[wins].astype(float)
     base_coef, *_ = np.linalg.lstsq(D, a, rcond=None)
     rss0 = float(np.sum((a - D @ base_coef) ** 2))
     n, k = a.size, D.shape[1] + 2
@@ -367,8 +363,8 @@ def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarra
     p = np.ones(freqs.size)
     for i, f in enumerate(freqs):
         ph = 2 * math.pi * f * x
-        c = np.add.reduceat(np.cos(ph), st[:-1])[wins] / lengths
-        s = np.add.reduceat(np.sin(ph), st[:-1])[wins] / lengths
+        c = window_means(problem, np.cos(ph), wins)
+        s = window_means(problem, np.sin(ph), wins)
         if np.sqrt(np.mean(c * c + s * s)) < MIN_WINDOW_GAIN:
             continue        # averaged away within the windows: nothing reliable to say
         X = np.column_stack([D, c, s])
@@ -381,11 +377,22 @@ def _defect_scan(problem: Problem, x: np.ndarray, a: np.ndarray, wins: np.ndarra
     return amp, p
 
 
+def window_means(problem: Problem, v: np.ndarray, wins: np.ndarray) -> np.ndarray:
+    """(m,) the mean of ``v`` (n,) over each of the windows ``wins`` (m,) of ``problem``; its
+    non-finite samples are left out (NaN for a window that has none)."""
+    st = problem.starts
+    ok = np.isfinite(v)
+    if ok.all():
+        return np.add.reduceat(v, st[:-1])[wins] / np.diff(st)[wins]
+    num = np.add.reduceat(np.where(ok, v, 0.0), st[:-1])[wins]
+    cnt = np.add.reduceat(ok.astype(float), st[:-1])[wins]
+    return np.where(cnt > 0, num / np.maximum(cnt, 1.0), np.nan)
+
+
 def driven_windows(problem: Problem, wins: np.ndarray) -> np.ndarray:
     """(m,) bool: which of the windows ``wins`` (m,) are driven, an actuator on for at least
     :data:`DRIVEN_SHARE` of their samples."""
-    st = problem.starts
-    return np.add.reduceat(problem.q, st[:-1])[wins] / np.diff(st)[wins] >= DRIVEN_SHARE
+    return window_means(problem, problem.q, wins) >= DRIVEN_SHARE
 
 
 def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
@@ -409,16 +416,8 @@ def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
     trials say whether the data could tell them apart.  The axis that fits best need not
     be the cause: the fitted force law's speed term takes up the part of a missing torque
     that follows the speed.  None when there is no such trend."""
-    st = problem.starts
     if wins.size == 0:
         return None
-
-    def window_mean(v: np.ndarray) -> np.ndarray:
-        ok = np.isfinite(v)
-        num = np.add.reduceat(np.where(ok, v, 0.0), st[:-1])[wins]
-        cnt = np.add.reduceat(ok.astype(float), st[:-1])[wins]
-        return np.where(cnt > 0, num / np.maximum(cnt, 1.0), np.nan)
-
     driven = driven_windows(problem, wins)
     trials = np.unique(trial_of[driven])
     D = (trial_of[driven][:, None] == trials[None, :]).astype(float)
@@ -430,7 +429,7 @@ def drive_trend(problem: Problem, axes: dict[str, np.ndarray], a: np.ndarray,
     rss0 = float(r0 @ r0)
     fits: dict[str, tuple[float, float, float, np.ndarray]] = {}
     for name in TREND_AXES:
-        x = window_mean(axes[name])[driven]
+        x = window_means(problem, axes[name], wins)[driven]
         if not np.all(np.isfinite(x)):
             continue
         xc = x - D @ np.linalg.lstsq(D, x, rcond=None)[0]      # within each trial
