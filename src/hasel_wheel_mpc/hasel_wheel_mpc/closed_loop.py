@@ -131,6 +131,10 @@ class WheelLoop:
             recorder.configuration({f"{ns}/controller.yaml": cfg.to_yaml()})
         self.log = LoopLog()
         self._pending: Command | None = Command(1, *START_ANGLES, 0)       # start the wheel
+        if recorder is not None:
+            # recorded as the MPC node publishes its own: a bag without it left the pads the
+            # start command drives without angles, and the identification refused the bag
+            recorder.command(ns, self._pending, 0.0)
         self._last_ref = None
 
     def step(self) -> None:

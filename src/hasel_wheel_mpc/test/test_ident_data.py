@@ -8,6 +8,8 @@ import pytest
 from hasel_wheel_mpc.ident import data as D
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.closed_loop import run_closed_loop
+from hasel_wheel_mpc.controller import START_ANGLES
 from hasel_wheel_mpc.recorder import Recorder
 from hasel_wheel_mpc.trials import TrialSpec, run_trial
 from hasel_wheel_sim.effects import effects_from_mapping
@@ -211,6 +213,24 @@ def test_bag_from_the_embedded_runner_gives_the_same_activations(tmp_path):
     on = [a for a in tr.activations[2:]]
     assert all(a.phi_a == pytest.approx(math.radians(5.0)) for a in on)
     assert all(b.eta == a.eta + 1 for a, b in zip(on, on[1:]))
+
+
+def test_a_closed_loop_bag_gives_the_start_command_to_the_pads_it_drives(tmp_path):
+    # the runner starts the wheel with its own command (sequence 0) before the MPC decides;
+    # with viscous drag (seed 3) the first switch-on falls on the sample where the MPC's first
+    # command goes out, and a bag without the start command left that pad without angles
+    rec = Recorder(tmp_path / "bag")
+    drag = {"viscous_drag": {"enabled": True,
+                             "coefficient": {"value": 1e-3, "unit": "N*m*s/rad"}}}
+    run_closed_loop(((0.0, 1.0),), 2.0, PlantConfig(seed=3, switching="tick",
+                                                    effects=effects_from_mapping(drag)),
+                    recorder=rec, clock=lambda: 0.0)
+    rec.close()
+    tr = D.load_trials([tmp_path / "bag"])[0]
+    first = tr.activations[0]
+    assert (first.phi_a, first.phi_d) == pytest.approx(START_ANGLES)
+    assert tr.n_a[first.start] == 1                      # the start command's pad
+    assert len(tr.activations) > 3 and any(a.phi_a != first.phi_a for a in tr.activations)
 
 
 def test_coastdown_friction_matches_the_closed_form():
