@@ -156,3 +156,32 @@ def test_a_refused_refit_that_shows_a_better_optimum_of_the_current_model_restar
     assert poorer_optimum(current, refused, _sim(("platform_periodic",), 0.2)) is None
     # a refit that did not converge to a number says nothing
     assert poorer_optimum(current, refused, _sim(("platform_periodic",), math.nan)) is None
+
+
+def _refit(effects, window_rmse, plausible=True):
+    import types
+    from hasel_wheel_mpc.ident.select import Evaluation
+    return Evaluation(effects, types.SimpleNamespace(rmse=window_rmse), 0.0, {},
+                      plausible=plausible, reason="r")
+
+
+def test_a_refit_refused_as_a_stand_in_makes_room_for_the_next_candidates():
+    from hasel_wheel_mpc.ident.select import further_refits, stood_in
+    current = _refit((), 0.770e-3)
+    scores = _scores(("angle_eccentricity", -70, 0.4e-3), ("gain_spread", -25, 0.4e-3),
+                     ("com_offset", -24, 0.4e-3), ("charge_retention", -3, 0.7e-3))
+    done = scores[:2]
+    # both refused for their values (a stand-in span by span; gains in a once-per-turn
+    # pattern), each having halved the window RMSE: the off-centre mass is refitted next
+    evs = [_refit(("angle_eccentricity",), 0.379e-3, plausible=False),
+           _refit(("gain_spread",), 0.367e-3, plausible=False)]
+    assert all(stood_in(e, current, 0.10) for e in evs)
+    assert [s.candidate for s in further_refits(scores, done, evs, current, 0.10, 2)] == [
+        "com_offset"]                       # retention is not significant (p >= SCREEN_P)
+    # a refused stand-in that did not cut the window RMSE by 5 % says nothing is there
+    weak = [_refit(("angle_eccentricity",), 0.74e-3, plausible=False)]
+    assert not stood_in(weak[0], current, 0.10)
+    assert further_refits(scores, done, weak, current, 0.10, 2) == []
+    # refused with plausible values and no window gain either: nothing more
+    assert further_refits(scores, done, [_refit(("gain_spread",), 0.76e-3)], current, 0.10,
+                          2) == []

@@ -10,6 +10,7 @@ from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import consistency as K
 from hasel_wheel_mpc.ident import report
 from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident.fit import Problem, coastdown_friction
 from hasel_wheel_sim.params import WheelParams
 
@@ -214,3 +215,76 @@ def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():
     assert c.drift > K.DRIFT and c.drift_p < 1e-6 and K.drifts(c)
     why = K.drift_caution(C.BY_ID["rise_lag"], c)
     assert "not the same throughout a trial" in why and "first to the second half" in why
+
+
+# closed-loop runs: every run steps through the same references, so the trials share one mean
+# speed, and the effect is refitted span by span instead (each drive cut into six spans)
+PROFILE = ((0.0, 1.0), (15.0, 1.6), (30.0, 2.2))       # (start [s], reference [rad/s])
+
+
+@pytest.fixture(scope="module")
+def closed_loop_com(tmp_path_factory):
+    """Two closed-loop runs of 45 s (plant seeds 3 and 4) on a plant with the off-centre mass
+    COM, read back from their bag as trials."""
+    from hasel_wheel_mpc.closed_loop import run_closed_loop
+    from hasel_wheel_mpc.ident.data import load_trials
+    from hasel_wheel_mpc.recorder import Recorder
+    from hasel_wheel_sim.effects import effects_from_mapping
+    from hasel_wheel_sim.plant import PlantConfig
+    path = tmp_path_factory.mktemp("closed_loop") / "bag"
+    rec = Recorder(path)
+    for seed in (3, 4):
+        cfg = PlantConfig(seed=seed, switching="tick",
+                          effects=effects_from_mapping({**S.ENCODER, **COM}))
+        run_closed_loop(PROFILE, 45.0, cfg, recorder=rec, ns=f"/wheel{seed}", clock=lambda: 0.0)
+    rec.close()
+    return load_trials([path])
+
+
+def _closed_loop_consistency(trials, cid: str) -> K.Consistency:
+    base = WheelParams()
+    eff = (C.BY_ID[cid],)
+    start = {**F.force_coordinates(base), "tau_f": base.tau_f, "brake_gain": base.brake_gain}
+    fit = Problem(trials, base, eff).fit(start=start, max_nfev=20)
+    return K.trial_consistency(trials, base, eff, fit, eff[0])
+
+
+def test_spans_are_cut_between_pushes_only_when_the_trials_share_their_speed(closed_loop_com):
+    speeds = [K.driven_speed(tr) for tr in closed_loop_com]
+    assert max(speeds) < 1.05 * min(speeds)
+    units = K.speed_units(closed_loop_com)
+    # 45 s at 1.0-2.2 rad/s is about 11 turns: three spans of at least three turns each
+    assert [j for j, _ in units] == [0] * 3 + [1] * 3
+    for j, tr in enumerate(closed_loop_com):
+        pieces = [p for i, p in units if i == j]
+        # consecutive, each starting where no pad is on, together the whole drive
+        starts = [int(np.searchsorted(tr.t, p.t[0])) for p in pieces]
+        assert all(tr.q[i] == 0 for i in starts[1:])
+        assert sum(p.t.size for p in pieces) == int(np.flatnonzero(tr.q | (tr.n_a >= 0))[-1]
+                                                    - np.flatnonzero(tr.q | (tr.n_a >= 0))[0] + 1)
+        v = [K.driven_speed(p) for p in pieces]
+        assert v[0] < 1.2 < 2.0 < v[-1]                  # the references step 1.0 -> 2.2 rad/s
+    # open-loop trials at three schedules differ in speed: they are their own units
+    assert K.speed_units(S.encoder_trials({}, 3)) == []
+
+
+def test_a_reading_error_standing_in_for_an_off_centre_mass_in_a_closed_loop_scatters(
+        closed_loop_com):
+    right = _closed_loop_consistency(closed_loop_com, "com_offset")
+    assert right.unit == "span" and len(right.trials) == 6
+    assert not K.inconsistent(right) and right.p > 0.01
+    stand_in = _closed_loop_consistency(closed_loop_com, "angle_eccentricity")
+    assert stand_in.unit == "span" and K.inconsistent(stand_in)
+    assert stand_in.p < 1e-6
+    assert "refitted span by span" in K.stand_in_reason(C.BY_ID["angle_eccentricity"], stand_in)
+
+
+@pytest.mark.parametrize("unit, names, expected", [("span", ["A", "B"], True),
+                                                   ("trial", ["A", "B"], False),
+                                                   ("span", [f"d{i}" for i in range(15)], False)])
+def test_span_values_that_scatter_about_one_value_refuse_an_effect_of_few_parameters(
+        unit, names, expected):
+    k = len(names)
+    c = K.Consistency("com_offset", names, ["a", "b"], np.zeros((2, k)), np.zeros((2, k)),
+                      np.zeros(k), 50.0, k, 1e-5, [1.0, 2.0], 0.0, 0.1, 1.0, unit)
+    assert K.inconsistent(c) is expected

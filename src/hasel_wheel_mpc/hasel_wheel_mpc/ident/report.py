@@ -17,10 +17,12 @@ chosen_effects             [stable identifier, ...] in the order chosen; [] when
 effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             physical: {...}, physical_ci95: {name: [lo, hi]}, wald_p}]
                             for the chosen ones (wald_p: "absent" in the final model);
-                            consistency: {speed_exponent, speed_exponent_sd,
+                            consistency: {units, speed_exponent, speed_exponent_sd,
                             speed_trend_p, drift_exponent, drift_exponent_sd, drift_p,
                             beside_hv_loss, caution} the effect refitted trial by trial
-                            (size ~ speed^k) and on the halves of each drive (size ~
+                            (units "trial"), or span by span when the trials' speeds
+                            do not differ ("span", each drive cut in six), size ~
+                            speed^k, and on the halves of each drive (size ~
                             hv^h), as checked when it was added (ident/consistency.py);
                             caution is a sentence when it changes within the trials,
                             else null; an exponent and its p are null where they cannot
@@ -295,7 +297,8 @@ def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
         return None
     speed = math.isfinite(con.exponent_sd)            # formed (see consistency._trend)
     drift = math.isfinite(con.drift_sd)
-    return {"speed_exponent": _num(con.exponent) if speed else None,
+    return {"units": con.unit,
+            "speed_exponent": _num(con.exponent) if speed else None,
             "speed_exponent_sd": _num(con.exponent_sd),
             "speed_trend_p": _num(con.trend_p) if speed else None,
             "drift_exponent": _num(con.drift) if drift else None,
@@ -361,7 +364,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
             L += [f"* `{e['id']}` ({e['title']}): {ps}; {phys}; Wald p = {e['wald_p']:.1e}"]
             k = e["consistency"]
             if k is not None:
-                L += [f"  * refitted trial by trial: size ~ speed^k, k = "
+                by = "trial by trial" if k["units"] == "trial" else "span by span"
+                L += [f"  * refitted {by}: size ~ speed^k, k = "
                       f"{_fmt(k['speed_exponent'], '+.2f')} +- {_fmt(k['speed_exponent_sd'], '.2f')}"
                       f" (p = {_fmt(k['speed_trend_p'], '.1e')}); on the halves of each drive: "
                       f"size ~ hv^h, h = {_fmt(k['drift_exponent'], '+.2f')} +- "
