@@ -46,8 +46,7 @@ Search (forward selection).  Starting from the nominal model:
      off-centre mass standing in for an angle sensor's reading error grows as about
      speed^2, a reading error standing in for an off-centre mass falls as speed^-3.
      Runs of one closed loop share their mean speed: then the spans of each drive are
-     refitted in place of the trials, and an effect of one or two parameters whose span
-     values scatter about one value beyond their uncertainty is refused too.
+     refitted in place of the trials (:func:`~.consistency.speed_units`).
      Refitted on the first and the second half of each drive as well, an effect that
      changes within the trials is refitted once more beside a force loss that grows with
      the accumulated HV time (a measuring device, :data:`~.consistency.HV_LOSS`): a rise
