@@ -218,7 +218,8 @@ def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():
 
 
 # closed-loop runs: every run steps through the same references, so the trials share one mean
-# speed, and the effect is refitted span by span instead (each drive cut into six spans)
+# speed, and the effect is refitted span by span instead (each drive cut into up to six
+# spans, about three turns each at least on average)
 PROFILE = ((0.0, 1.0), (15.0, 1.6), (30.0, 2.2))       # (start [s], reference [rad/s])
 
 
@@ -260,6 +261,7 @@ def test_spans_are_cut_between_pushes_only_when_the_trials_share_their_speed(clo
         # consecutive, each starting where no pad is on, together the whole drive
         starts = [int(np.searchsorted(tr.t, p.t[0])) for p in pieces]
         assert all(tr.q[i] == 0 for i in starts[1:])
+        assert [a + p.t.size for a, p in zip(starts, pieces)][:-1] == starts[1:]
         assert sum(p.t.size for p in pieces) == int(np.flatnonzero(tr.q | (tr.n_a >= 0))[-1]
                                                     - np.flatnonzero(tr.q | (tr.n_a >= 0))[0] + 1)
         v = [K.driven_speed(p) for p in pieces]

@@ -37,16 +37,17 @@ steps, recorded by several wheels) all have the same mean speed, so the trials c
 trend with it (an angle sensor's eccentricity standing in for an off-centre mass, 3 such
 runs of 230 s: k = +8.6 +- 133, and it was named; ad hoc).  When the trials' speeds while
 driven span less than :data:`MIN_SPEED_RATIO`, each drive is cut into :data:`SPANS` spans
-of about equal duration (:func:`speed_spans`, between two pushes), and each span is refitted
+of about equal duration, fewer when they would average under :data:`MIN_SPAN_TURNS` turns
+(:func:`speed_spans`, between two pushes), and each span is refitted
 as a trial is (the effect's own parameters and the nominal model), weighed alone while the
 samples before it still run the model (``keep``; cut off instead, a right retention of 0.2/s
 scattered over the spans, chi^2 54 on 17 dof, against 28 with its history).  The spans are
-then the units of the trend and of the chi^2 about one value.  Ad hoc, 3 closed-loop runs of
+then the units of the trend (and of the chi^2 about one value, which is reported only).  Ad hoc, 3 closed-loop runs of
 115 s (the demo's profile at half length, plant seed 3, fitted from the reference values):
 the right models of seven effects gave |k| <= 0.07 (p >= 0.34); an off-centre mass on
 eccentricity data k = +0.91 +- 0.02; an eccentricity on off-centre-mass data only
-k = -0.41 +- 0.03 (p = 2e-40; in the search, fitted from the nominal model, -0.61 +- 0.04,
-refused): in a closed loop the pushes answer the disturbance, so a stand-in's size need not
+k = -0.41 +- 0.03 (p = 2e-40), which is *not* refused (|k| < :data:`EXPONENT`); in the
+search, fitted from the nominal model, it read -0.61 +- 0.04 and was refused: in a closed loop the pushes answer the disturbance, so a stand-in's size need not
 follow a power of the speed.  Its values scatter far beyond their uncertainty (chi^2 505 on
 34 dof), but so, less, did those of the right retention in the search (51 on 17, p = 3e-5)
 and of the right gain spread (5714 on 255): a rule on that scatter refused the right
@@ -133,10 +134,13 @@ EXPONENT = 0.5
 #: refitted one by one in place of the trials, provided their speeds span this ratio.
 MIN_SPEED_RATIO = 1.2
 SPANS = 6
-#: ... but no more spans than leave each at least this many turns of the wheel on average: a
-#: once-per-turn effect refitted on about one turn was more certain than its fit said (a right
-#: off-centre mass on two 45 s runs cut into six spans of 7.5 s: chi^2 p = 0.0045; ad hoc).
+#: ... but no more spans than leave this many turns of the wheel to each on average, so that
+#: a once-per-turn effect is seen over a few turns in every span (two 45 s runs cut into six
+#: spans of 7.5 s left about one turn to the slowest; a chi^2 scatter rule tried then, and
+#: not kept, read p = 0.0045 for the right off-centre mass there; ad hoc).
 MIN_SPAN_TURNS = 3.0
+#: The fewest samples of a span (a :class:`~.data.Trial` needs 30).
+MIN_SPAN_SAMPLES = 30
 #: A change within the trials this unlikely by chance (p < TREND_P, two-sided), and steeper
 #: than size ~ hv^DRIFT, is reported as a caution (:func:`drifts`).
 DRIFT = 0.05
@@ -372,14 +376,18 @@ def speed_spans(tr: Trial, n: int = SPANS) -> list[Trial]:
     n = max(min(n, int(turns / MIN_SPAN_TURNS)), 1)
     cuts = [first]
     for t_cut in np.linspace(tr.t[first], tr.t[end - 1], n + 1)[1:-1]:
-        i = max(int(np.searchsorted(tr.t, t_cut)), cuts[-1] + 1)
+        i = max(int(np.searchsorted(tr.t, t_cut)), cuts[-1] + MIN_SPAN_SAMPLES)
         while i < end and tr.q[i]:
             i += 1
         if i < end:
             cuts.append(i)
+    while len(cuts) > 1 and end - cuts[-1] < MIN_SPAN_SAMPLES:
+        cuts.pop()                                      # a short tail joins the span before
     cuts.append(end)
+    if end - first < MIN_SPAN_SAMPLES:
+        return []
     return [tr.slice(a, b, f"{tr.name} {tr.t[a] - tr.t[0]:.0f}-{tr.t[b - 1] - tr.t[0]:.0f} s")
-            for a, b in zip(cuts, cuts[1:]) if b - a > 1]
+            for a, b in zip(cuts, cuts[1:])]
 
 
 def speed_units(trials: list[Trial]) -> list[tuple[int, Trial]]:
@@ -387,8 +395,8 @@ def speed_units(trials: list[Trial]) -> list[tuple[int, Trial]]:
     driven span less than :data:`MIN_SPEED_RATIO` and the spans' speeds span at least that;
     [] otherwise (the trials themselves are the units)."""
     speeds = [driven_speed(tr) for tr in trials]
-    if min(speeds) > 0.0 and max(speeds) >= MIN_SPEED_RATIO * min(speeds):
-        return []
+    if min(speeds) <= 0.0 or max(speeds) >= MIN_SPEED_RATIO * min(speeds):
+        return []           # a trial at rest or rolling back: the trials themselves
     spans = [(j, piece) for j, tr in enumerate(trials) for piece in speed_spans(tr)]
     v = [driven_speed(piece) for _, piece in spans]
     if len(spans) < 3 or min(v) <= 0.0 or max(v) < MIN_SPEED_RATIO * min(v):
@@ -495,9 +503,7 @@ def inconsistent(c: Consistency | None) -> bool:
     "span"): its size trends with their speed, significantly (p < TREND_P) and steeper than
     speed^(+-EXPONENT).  A drift within the trials (:func:`drifts`) is reported, not
     refused (see the module docstring)."""
-    if c is None:
-        return False
-    return c.trend_p < TREND_P and abs(c.exponent) > EXPONENT
+    return c is not None and c.trend_p < TREND_P and abs(c.exponent) > EXPONENT
 
 
 def stand_in_reason(c: Candidate, con: Consistency | None) -> str | None:
@@ -507,7 +513,8 @@ def stand_in_reason(c: Candidate, con: Consistency | None) -> str | None:
         return None
     how = ("in every trial, refitted trial by trial" if con.unit == "trial" else
            "at every speed, refitted span by span (the trials' speeds while driven differ by "
-           f"less than {MIN_SPEED_RATIO}x; each drive cut into {SPANS} spans)")
+           f"less than {MIN_SPEED_RATIO}x; {len(con.trials)} spans of "
+           f"{len(con.halves_trials)} drives)")
     return (f"{c.id} is not the same {how}: {con.text(c)}; a physical {c.id} would be one "
             f"value at every speed, so it stands in for an effect whose size goes otherwise "
             f"with the speed")

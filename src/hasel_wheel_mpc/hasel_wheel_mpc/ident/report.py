@@ -21,7 +21,8 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             speed_trend_p, drift_exponent, drift_exponent_sd, drift_p,
                             beside_hv_loss, caution} the effect refitted trial by trial
                             (units "trial"), or span by span when the trials' speeds
-                            do not differ ("span", each drive cut in six), size ~
+                            differ by less than 1.2x ("span", each drive cut in up to
+                            six), size ~
                             speed^k, and on the halves of each drive (size ~
                             hv^h), as checked when it was added (ident/consistency.py);
                             caution is a sentence when it changes within the trials,

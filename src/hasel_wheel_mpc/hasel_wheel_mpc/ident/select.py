@@ -87,8 +87,10 @@ s): nothing was named; together they cut the held-out simulation error 2.3x (0.0
 0.0279 rad/s; bench_ident_effects.py), with c 1.012e-3 (the truth 1e-3) and a gain std of 0.105 (the plant drew
 0.110); tested.
 
-When no refit of a round is accepted and just one is backed by the windows in that way, the next
-``max_refits`` significant candidates that were not refitted get refits of their own
+When no refit of a round is accepted and just one is backed by the windows in that way (or
+none is, but one cut the window RMSE as much and was refused for its values,
+:func:`stood_in`), the next ``max_refits`` significant candidates that were not refitted get
+refits of their own
 (:func:`further_refits`): a second effect can hold the leader's free run down, and it then
 scores below the leader, where the :func:`dominant` rule leaves it out.  And when one refit
 is accepted but a refused one fits the held-out windows as well (a tie, which :func:`pick`
@@ -702,11 +704,11 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             evs.append(refit(sc))
             if evs[-1].accepted and not rivals:
                 break       # the next round screens the rest again, against this model
+        cut = [e.effects[-1] for e in evs
+               if backed(e, current, min_gain) or stood_in(e, current, min_gain)]
         for sc in further_refits(scores, promising, evs, current, min_gain, max_refits):
             # a refused refit that the windows back may be held down by a second effect:
             # the next significant candidates get their own refits (and the pair below)
-            cut = [e.effects[-1] for e in evs
-                   if backed(e, current, min_gain) or stood_in(e, current, min_gain)]
             say(f"  {sc.candidate}: refitted as well, since {' and '.join(cut)} cut the "
                 f"window RMSE but {'was' if len(cut) == 1 else 'were'} refused")
             evs.append(refit(sc))
