@@ -134,7 +134,11 @@ def test_closed_loop_demo_writes_bag_plots_and_table(tmp_path, capsys):
     refs = [m.data for m in topics_seen["/wheel0/reference_speed"]]
     assert refs == [1.0, 1.5, 2.0, 2.5, 2.6, 2.0]                     # the Fig. 11 profile
     status = topics_seen["/wheel0/mpc_status"]
-    assert len(status) == len(topics_seen["/wheel0/command"]) > 50
+    # every decision's command, after the runner's own start command (sequence 0, no status)
+    commands = topics_seen["/wheel0/command"]
+    assert commands[0].sequence == 0 and commands[0].n_a == 1
+    assert len(status) == len(commands) - 1 > 50
+    assert [c.sequence for c in commands[1:]] == [s.command.sequence for s in status]
     assert all(s.candidates_evaluated >= 15 for s in status if not s.braking)
     est = topics_seen["/wheel0/state_estimate"]
     assert len(est) == len(topics_seen["/wheel0/telemetry"]) > 10000
