@@ -33,26 +33,29 @@ reading error on off-centre-mass data -2.69 to -3.66, all with p <= 5e-7.
 The homogeneity chi^2 of the u_j about ubar is reported beside it.
 
 Span by span.  Runs of one closed loop through one reference profile (the demo's Fig. 11
-steps, recorded by several wheels) all have the same mean speed, so the trials cannot show a
-trend with it (an angle sensor's eccentricity standing in for an off-centre mass, 3 such
-runs of 230 s: k = +8.6 +- 133, and it was named; ad hoc).  When the trials' speeds while
-driven span less than :data:`MIN_SPEED_RATIO`, each drive is cut into :data:`SPANS` spans
-of about equal duration, fewer when they would average under :data:`MIN_SPAN_TURNS` turns
-(:func:`speed_spans`, between two pushes), and each span is refitted
-as a trial is (the effect's own parameters and the nominal model), weighed alone while the
-samples before it still run the model (``keep``; cut off instead, a right retention of 0.2/s
-scattered over the spans, chi^2 54 on 17 dof, against 28 with its history).  The spans are
-then the units of the trend (and of the chi^2 about one value, which is reported only).  Ad hoc, 3 closed-loop runs of
-115 s (the demo's profile at half length, plant seed 3, fitted from the reference values):
-the right models of seven effects gave |k| <= 0.07 (p >= 0.34); an off-centre mass on
-eccentricity data k = +0.91 +- 0.02; an eccentricity on off-centre-mass data only
-k = -0.41 +- 0.03 (p = 2e-40), which is *not* refused (|k| < :data:`EXPONENT`); in the
-search, fitted from the nominal model, it read -0.61 +- 0.04 and was refused: in a closed loop the pushes answer the disturbance, so a stand-in's size need not
-follow a power of the speed.  Its values scatter far beyond their uncertainty (chi^2 505 on
-34 dof), but so, less, did those of the right retention in the search (51 on 17, p = 3e-5)
-and of the right gain spread (5714 on 255): a rule on that scatter refused the right
-retention and named a gain spread instead (ad hoc), and was not kept.  The halves below
-stay halves of the trials.
+steps, recorded by several wheels) all have the same mean speed, so the trials cannot show
+a trend with it (an angle sensor's eccentricity standing in for an off-centre mass, 3 such
+runs of 230 s: k = +8.6 +- 133, and it was named; ad hoc; on those runs a 0.31 mrad
+eccentricity is still named beside it, its gain coming from the force law it lets unbend,
+which no check here sees: README, Known gaps).  When the trials' speeds while driven span
+less than :data:`MIN_SPEED_RATIO`, each drive is cut into :data:`SPANS` spans of about
+equal duration, fewer when they would average under :data:`MIN_SPAN_TURNS` turns
+(:func:`speed_spans`, between two pushes), and each span is refitted as a trial is (the
+effect's own parameters and the nominal model), weighed alone while the samples before it
+still run the model (``keep``; cut off instead, a right retention of 0.2/s scattered over
+the spans, chi^2 54 on 17 dof, against 28 with its history).  The spans are then the units
+of the trend (and of the chi^2 about one value, which is reported only).  Ad hoc, 3
+closed-loop runs of 115 s (the demo's profile at half length, plant seed 3, fitted from the
+reference values): the right models of seven effects gave |k| <= 0.07 (p >= 0.34); an
+off-centre mass on eccentricity data k = +0.91 +- 0.02; an eccentricity on off-centre-mass
+data only k = -0.41 +- 0.03 (p = 2e-40), which is *not* refused (|k| < :data:`EXPONENT`);
+in the search, fitted from the nominal model, it read -0.61 +- 0.04 and was refused: in a
+closed loop the pushes answer the disturbance, so a stand-in's size need not follow a power
+of the speed.  Its values scatter far beyond their uncertainty (chi^2 505 on 34 dof), but
+so, less, did those of the right retention in the search (51 on 17, p = 3e-5) and of the
+right gain spread (5714 on 255): a rule on that scatter refused the right retention and
+named a gain spread instead (ad hoc), and was not kept.  The halves below stay halves of
+the trials.
 
 Within each trial.  Speed is not the only thing that changes: as a trial goes on, every
 actuator accumulates HV time.  An effect that stands in for one that grows with it (charge
@@ -366,12 +369,15 @@ def speed_spans(tr: Trial, n: int = SPANS) -> list[Trial]:
     """The trial's drive (first to last sample with an actuator scheduled or on) cut into
     ``n`` spans of about equal duration, or fewer so that they average
     :data:`MIN_SPAN_TURNS` turns each, each a trial of its own named after its times [s];
-    each cut is moved on to the next sample with no actuator on, so no push is cut.  [] when
-    the trial has no drive."""
+    each cut is moved on to the next sample with no actuator on, so no push is cut, and a
+    tail under :data:`MIN_SPAN_SAMPLES` joins the span before.  [] when the trial has no
+    drive, or one shorter than that."""
     driven = np.flatnonzero(tr.q.astype(bool) | (tr.n_a >= 0))
     if driven.size == 0:
         return []
     first, end = int(driven[0]), int(driven[-1]) + 1
+    if end - first < MIN_SPAN_SAMPLES:
+        return []
     turns = abs(float(tr.angle[end - 1] - tr.angle[first])) / (2 * math.pi)
     n = max(min(n, int(turns / MIN_SPAN_TURNS)), 1)
     cuts = [first]
@@ -384,8 +390,6 @@ def speed_spans(tr: Trial, n: int = SPANS) -> list[Trial]:
     while len(cuts) > 1 and end - cuts[-1] < MIN_SPAN_SAMPLES:
         cuts.pop()                                      # a short tail joins the span before
     cuts.append(end)
-    if end - first < MIN_SPAN_SAMPLES:
-        return []
     return [tr.slice(a, b, f"{tr.name} {tr.t[a] - tr.t[0]:.0f}-{tr.t[b - 1] - tr.t[0]:.0f} s")
             for a, b in zip(cuts, cuts[1:])]
 
