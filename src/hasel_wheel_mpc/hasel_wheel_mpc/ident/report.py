@@ -22,8 +22,7 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             beside_hv_loss, caution} the effect refitted trial by trial
                             (units "trial"), or span by span when the trials' speeds
                             differ by less than 1.2x ("span", each drive cut in up to
-                            six), size ~
-                            speed^k, and on the halves of each drive (size ~
+                            six), size ~ speed^k, and on the halves of each drive (size ~
                             hv^h), as checked when it was added (ident/consistency.py);
                             caution is a sentence when it changes within the trials,
                             else null; an exponent and its p are null where they cannot

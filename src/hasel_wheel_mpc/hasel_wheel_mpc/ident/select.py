@@ -487,20 +487,25 @@ def supported_pair(evs: list[Evaluation], current: Evaluation,
     return (both[0], both[1]) if len(both) >= 2 else ()
 
 
+def cuts_windows(ev: Evaluation, current: Evaluation, min_gain: float) -> bool:
+    """Whether ``ev`` (the current model plus one effect) cut the window RMSE on all trials
+    by at least half of ``min_gain`` against ``current``, whatever its verdict."""
+    return (len(ev.effects) == len(current.effects) + 1
+            and ev.fit.rmse <= (1.0 - 0.5 * min_gain) * current.fit.rmse)
+
+
 def backed(ev: Evaluation, current: Evaluation, min_gain: float) -> bool:
     """Whether the windows back ``ev`` (the current model plus one effect) whatever its
     verdict: plausible values, and the window RMSE on all trials cut by at least half of
-    ``min_gain``."""
-    return (len(ev.effects) == len(current.effects) + 1 and ev.plausible
-            and ev.fit.rmse <= (1.0 - 0.5 * min_gain) * current.fit.rmse)
+    ``min_gain`` (:func:`cuts_windows`)."""
+    return ev.plausible and cuts_windows(ev, current, min_gain)
 
 
 def stood_in(ev: Evaluation, current: Evaluation, min_gain: float) -> bool:
-    """Whether ``ev`` (the current model plus one effect) cut the window RMSE on all trials
-    by at least half of ``min_gain`` but was refused for its values (implausible, or a
-    stand-in for another effect): the windows say an effect is there, not this one."""
-    return (len(ev.effects) == len(current.effects) + 1 and not ev.plausible
-            and ev.fit.rmse <= (1.0 - 0.5 * min_gain) * current.fit.rmse)
+    """Whether ``ev`` (the current model plus one effect) cut the window RMSE as
+    :func:`backed` asks but was refused for its values (implausible, or a stand-in for
+    another effect): the windows say an effect is there, not this one."""
+    return not ev.plausible and cuts_windows(ev, current, min_gain)
 
 
 def further_refits(scores: list[Screening], done: list[Screening], evs: list[Evaluation],
@@ -704,8 +709,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             evs.append(refit(sc))
             if evs[-1].accepted and not rivals:
                 break       # the next round screens the rest again, against this model
-        cut = [e.effects[-1] for e in evs
-               if backed(e, current, min_gain) or stood_in(e, current, min_gain)]
+        cut = [e.effects[-1] for e in evs if cuts_windows(e, current, min_gain)]
         for sc in further_refits(scores, promising, evs, current, min_gain, max_refits):
             # a refused refit that the windows back may be held down by a second effect:
             # the next significant candidates get their own refits (and the pair below)
