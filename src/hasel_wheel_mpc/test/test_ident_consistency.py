@@ -227,19 +227,7 @@ PROFILE = ((0.0, 1.0), (15.0, 1.6), (30.0, 2.2))       # (start [s], reference [
 def closed_loop_com(tmp_path_factory):
     """Two closed-loop runs of 45 s (plant seeds 3 and 4) on a plant with the off-centre mass
     COM, read back from their bag as trials."""
-    from hasel_wheel_mpc.closed_loop import run_closed_loop
-    from hasel_wheel_mpc.ident.data import load_trials
-    from hasel_wheel_mpc.recorder import Recorder
-    from hasel_wheel_sim.effects import effects_from_mapping
-    from hasel_wheel_sim.plant import PlantConfig
-    path = tmp_path_factory.mktemp("closed_loop") / "bag"
-    rec = Recorder(path)
-    for seed in (3, 4):
-        cfg = PlantConfig(seed=seed, switching="tick",
-                          effects=effects_from_mapping({**S.ENCODER, **COM}))
-        run_closed_loop(PROFILE, 45.0, cfg, recorder=rec, ns=f"/wheel{seed}", clock=lambda: 0.0)
-    rec.close()
-    return load_trials([path])
+    return S.closed_loop_trials(COM, PROFILE, 45.0, (3, 4), tmp_path_factory.mktemp("loop"))
 
 
 def _closed_loop_consistency(trials, cid: str) -> K.Consistency:

@@ -103,6 +103,21 @@ def test_the_braking_gain_is_fitted_when_the_data_brakes():
     assert res.values["brake_gain"] == pytest.approx(TRUE.brake_gain, rel=0.05)
 
 
+def test_a_fit_that_stopped_or_ended_on_a_bound_is_called_bent(nominal_trials):
+    import dataclasses
+    from hasel_wheel_mpc.ident.screen import bent
+    prob = F.Problem(nominal_trials)
+    res = prob.fit(start={"tau_f": TRUE.tau_f})
+    assert res.converged and prob.at_bounds(res) == [] and bent(prob, res) is None
+    short = prob.fit(start={"peak": 2.0 * res.values["peak"]}, max_nfev=2)
+    assert not short.converged and bent(prob, short) == "stopped unconverged after 2 evaluations"
+    # the width's range is 0.01..2 (fit.nominal_specs): a fit that ended on its floor
+    edge = dataclasses.replace(res, values={**res.values, "width": 0.01})
+    assert prob.at_bounds(edge) == ["width"] and bent(prob, edge) == "width on its bound"
+    inside = dataclasses.replace(res, values={**res.values, "width": 0.01 + 1e-3})
+    assert bent(prob, inside) is None
+
+
 def test_a_kept_span_weighs_only_its_samples_and_keeps_the_history_before_it(nominal_trials):
     tr = nominal_trials[0]
     everything = F.Problem([tr], TRUE)

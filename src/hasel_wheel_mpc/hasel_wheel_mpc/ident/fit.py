@@ -274,6 +274,18 @@ class Problem:
         return [self.specs[i].name for i in self.free]
 
     # -- parameters -> model ------------------------------------------------------------------
+    def at_bounds(self, fit: FitResult, rel: float = 1e-6) -> list[str]:
+        """The nominal parameters of ``fit`` (a fit of this problem) that ended on a bound of
+        their range (within ``rel`` of the range's width)."""
+        out = []
+        for i in self.free:
+            p = self.specs[i]
+            if i < self.n_nominal and p.name in fit.values:
+                v, tol = fit.values[p.name], rel * (p.upper - p.lower)
+                if v <= p.lower + tol or v >= p.upper - tol:
+                    out.append(p.name)
+        return out
+
     def full_theta(self, theta_free: np.ndarray) -> np.ndarray:
         full = np.array([self.fixed.get(p.name, p.start) for p in self.specs], dtype=float)
         full[self.free] = theta_free

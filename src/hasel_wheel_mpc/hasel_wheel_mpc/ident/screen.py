@@ -37,6 +37,19 @@ still predicted nothing, but at the reference force law the error is lowest near
 the refit that named the rise lag (117.6 ms, held-out simulation error 4.2x lower).  On data
 without the effect the scan finds nothing significant and adds no fit.
 
+A current fit that looks bent (:func:`bent`: it stopped at its evaluation limit, or a nominal
+parameter ended on a bound) gets one more place per candidate: a short fit
+(:data:`SCAN_NFEV` evaluations) of the model with the candidate, from the reference force
+law, tau_f and braking gain.  In a closed loop the pushes and brakes answer a disturbance,
+so the nominal force law can take much of it up.  Seen on `hasel_wheel demo --wheels 3
+--hold-scale 0.5` with a platform torque of 0.004 N*m (3 x 115 s, plant seed 3; ad hoc): the
+nominal fit stopped after 100 evaluations at peak 257, width 0.021 and the braking gain on its
+bound of 100 (the truth about 20, 0.10 and 3).  From there and from the reference force law
+with that braking gain, one step predicted nothing (chi^2 13) and nothing was named.  The
+short fit from the reference reached the noise floor (window RMSE 0.287 mrad against 0.626),
+chi^2 1309, and the refit named the torque (0.00397 N*m at 0.50 rad, held-out simulation
+error 1.76 -> 0.040 rad/s).  A fit that converged inside its ranges does not get this place.
+
 The statistic is the best place's, not corrected for trying several: it only chooses what
 to refit, and the refit's held-out errors and Wald test decide.  (The scan's short fit makes
 it close to a likelihood-ratio statistic, which has the same chi^2 law under "absent".)
@@ -120,11 +133,15 @@ def scan_places(prob: Problem, candidate: Candidate, places: list[dict[str, floa
 @with_one_blas_thread
 def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...],
            current: FitResult, current_problem: Problem, candidate: Candidate,
-           window: float, reference: dict[str, float]) -> Screening:
+           window: float, reference: dict[str, float],
+           restart: dict[str, float] | None = None) -> Screening:
     """Score test of ``candidate`` added to the model ``chosen`` fitted as ``current``.
 
     ``reference`` holds the second start's values (the reference force law, the current
-    tau_f).  The window starts of ``current`` warm-start both."""
+    tau_f).  The window starts of ``current`` warm-start both.  ``restart`` (given when the
+    current fit is bent: :func:`bent`) is one more place: a short fit
+    (:data:`SCAN_NFEV` evaluations) of the model with the candidate from those values, which
+    counts with the error it reached."""
     prob = Problem(trials, base, chosen + (candidate,), window)
     x_start = current_problem.window_starts(current.z)
     n_used = int(prob.ok.sum())
@@ -152,6 +169,12 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
             hi = np.array([prob.specs[i].upper for i in prob.free])
             best = (sse, theta, np.clip(theta - scale * coef, lo, hi), float(r @ r),
                     k >= n_given)
+    if restart is not None:
+        # the short fit's own error, not a step predicted from it: from that far a linear
+        # step can promise a drop that no fit delivers
+        f = prob.fit(start={**current.values, **restart}, x0=x_start, max_nfev=SCAN_NFEV)
+        if f.rmse ** 2 * n_used < best[0]:
+            best = (f.rmse ** 2 * n_used, f.theta, f.theta, f.rmse ** 2 * n_used, True)
     sse, theta, stepped, sse_here, scanned = best
     # the full fit starts from the better place for the force law (one linearised step can
     # overshoot its strongly nonlinear bump) and from the step for the candidate's own
@@ -178,6 +201,16 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
                      float(stats.chi2.sf(statistic, candidate.size)),
                      float(stats.chi2.logsf(statistic, candidate.size) / math.log(10.0)),
                      math.sqrt(max(sse, 0.0) / n_used), start, scanned)
+
+
+def bent(problem: Problem, fit: FitResult) -> str | None:
+    """Why ``fit`` (of ``problem``) looks bent by something its model lacks: it stopped at its
+    evaluation limit, or a nominal parameter ended on a bound of its range; None otherwise."""
+    why = [] if fit.converged else [f"stopped unconverged after {fit.nfev} evaluations"]
+    edge = problem.at_bounds(fit)
+    if edge:
+        why.append(f"{', '.join(edge)} on {'its bound' if len(edge) == 1 else 'their bounds'}")
+    return "; ".join(why) or None
 
 
 #: Evaluations of a sizing refit started from a score test's step (:func:`screened_refit`).

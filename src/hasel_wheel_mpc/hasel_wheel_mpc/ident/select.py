@@ -4,7 +4,9 @@ effect with held-out validation by trial.
 Search (forward selection).  Starting from the nominal model:
 
 1. **screen** every candidate not yet in the model: add it and refit by one Gauss-Newton
-   step, a score test (:mod:`.screen`).  A candidate goes on when it is significant
+   step, a score test (:mod:`.screen`); when the current fit looks bent (it stopped
+   unconverged, or a nominal parameter ended on a bound: :func:`~.screen.bent`), also by a
+   short fit from the reference force law.  A candidate goes on when it is significant
    (p < ``SCREEN_P``) and either is predicted to cut the window RMSE by at least half of
    ``min_gain`` or belongs to a *dominant* group of at most ``max_refits``: each member at
    least twice as significant (in -log10 p) as every candidate outside (:func:`dominant`).
@@ -139,7 +141,7 @@ from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
 from .residual import Diagnostics, Signature, analyse, autocorrelation_signature
-from .screen import SCREEN_P, Screening, screen
+from .screen import SCREEN_P, Screening, bent, screen
 from .threads import with_one_blas_thread
 
 
@@ -651,8 +653,13 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         problem = Problem(trials, base, chosen, window)
         ref = dict(reference, tau_f=current.fit.values.get("tau_f", base.tau_f))
 
+        crooked = bent(problem, current.fit)
+        restart = None if crooked is None else \
+            dict(reference, tau_f=friction.tau_f if friction else base.tau_f,
+                 brake_gain=base.brake_gain)
+
         def score(c: Candidate) -> Screening:
-            return screen(trials, base, chosen, current.fit, problem, c, window, ref)
+            return screen(trials, base, chosen, current.fit, problem, c, window, ref, restart)
 
         # the costliest screens first, so that the threads finish together (a place costs a
         # window solve, ~12 simulations, and a Jacobian, one per parameter; a scan up to
@@ -663,6 +670,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             done = dict(zip((c.id for c in order), pool.map(score, order)))
         scores = [done[c.id] for c in todo]
         ident.screenings.append(scores)
+        if crooked is not None:
+            say(f"the current fit looks bent ({crooked}): each candidate is also screened by a"
+                f" short fit from the reference force law")
         say("screened: " + ", ".join(f"{s.candidate} chi2 {s.statistic:.0f}" for s in scores))
         promising, rivals = refit_order(scores, current.fit.rmse, min_gain, max_refits)
         evs: list[Evaluation] = []

@@ -3,11 +3,14 @@
 Each trial is the paper's open-loop characterisation run (Sec. IV-B): start at an initial
 speed, let the firmware switch every actuator at (phi_a, phi_d) on its ticks, then switch HV
 off and record the coast-down, all through the simulated 10-bit encoder.
+:func:`closed_loop_trials` records runs of the embedded closed loop instead (observer and MPC
+choosing every push), read back from their bag as a user's ``hasel_wheel demo`` bag would be.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -95,3 +98,26 @@ def encoder_trials(effects: dict, seed: int = 3, specs=SHORT_SET) -> list[Trial]
     cfg = PlantConfig(seed=seed, switching="tick",
                       effects=effects_from_mapping({**ENCODER, **effects}))
     return record_set(specs, config=cfg)
+
+
+def closed_loop_trials(effects: dict, profile: tuple[tuple[float, float], ...], duration: float,
+                       seeds: tuple[int, ...], directory: Path) -> list[Trial]:
+    """One run of the embedded closed loop (:func:`~hasel_wheel_mpc.closed_loop.run_closed_loop`,
+    the paper's model in the controller) per plant seed in ``seeds``, on ``profile`` ((start
+    [s], reference [rad/s]), ...) for ``duration`` [s], on a plant with :data:`ENCODER` and
+    ``effects``, tick switching.  All runs go into one bag under ``directory`` (namespace
+    ``/wheel<seed>``), which is read back as the trials."""
+    from ..closed_loop import run_closed_loop          # the loop needs the MPC: only here
+    from ..recorder import Recorder
+    from .data import load_trials
+    path = Path(directory) / "bag"
+    rec = Recorder(path)
+    try:
+        for seed in seeds:
+            cfg = PlantConfig(seed=seed, switching="tick",
+                              effects=effects_from_mapping({**ENCODER, **effects}))
+            run_closed_loop(profile, duration, cfg, recorder=rec, ns=f"/wheel{seed}",
+                            clock=lambda: 0.0)
+    finally:
+        rec.close()
+    return load_trials([path])
