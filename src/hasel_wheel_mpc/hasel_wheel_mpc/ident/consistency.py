@@ -35,9 +35,10 @@ The homogeneity chi^2 of the u_j about ubar is reported beside it.
 Span by span.  Runs of one closed loop through one reference profile (the demo's Fig. 11
 steps, recorded by several wheels) all have the same mean speed, so the trials cannot show
 a trend with it (an angle sensor's eccentricity standing in for an off-centre mass, 3 such
-runs of 230 s: k = +8.6 +- 133, and it was named; ad hoc; on those runs a 0.31 mrad
-eccentricity is still named beside it, its gain coming from the force law it lets unbend,
-which no check here sees: README, Known gaps).  When the trials' speeds while driven span
+runs of 230 s: k = +8.6 +- 133, and it was named; ad hoc.  Later a 0.31 mrad eccentricity
+was still named beside it there, its gain from the force law it let unbend, which no check
+here sees; since the screening's short fit from the reference force law (screen.bent) the
+off-centre mass is named alone: README, Known gaps).  When the trials' speeds while driven span
 less than :data:`MIN_SPEED_RATIO`, each drive is cut into :data:`SPANS` spans of about
 equal duration, fewer when they would average under :data:`MIN_SPAN_TURNS` turns
 (:func:`speed_spans`, between two pushes), and each span is refitted as a trial is (the
