@@ -1,5 +1,6 @@
 """Identification of the nominal model: recovery of known parameters from plant data through
 the 10-bit encoder, and the identifiability report against the analytic null directions."""
+import dataclasses
 import math
 
 import numpy as np
@@ -9,6 +10,7 @@ from hasel_wheel_mpc.ident import data as D
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import identifiability as I
 from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.ident.screen import bent
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.model import param_vector
@@ -104,8 +106,6 @@ def test_the_braking_gain_is_fitted_when_the_data_brakes():
 
 
 def test_a_fit_that_stopped_or_ended_on_a_bound_is_called_bent(nominal_trials):
-    import dataclasses
-    from hasel_wheel_mpc.ident.screen import bent
     prob = F.Problem(nominal_trials)
     res = prob.fit(start={"tau_f": TRUE.tau_f})
     assert res.converged and prob.at_bounds(res) == [] and bent(prob, res) is None
@@ -116,6 +116,9 @@ def test_a_fit_that_stopped_or_ended_on_a_bound_is_called_bent(nominal_trials):
     assert prob.at_bounds(edge) == ["width"] and bent(prob, edge) == "width on its bound"
     inside = dataclasses.replace(res, values={**res.values, "width": 0.01 + 1e-3})
     assert bent(prob, inside) is None
+    both = dataclasses.replace(short, values={**res.values, "width": 2.0, "tau_f": 1e-5})
+    assert bent(prob, both) == ("stopped unconverged after 2 evaluations; width, tau_f on their "
+                                "bounds")
 
 
 def test_a_kept_span_weighs_only_its_samples_and_keeps_the_history_before_it(nominal_trials):

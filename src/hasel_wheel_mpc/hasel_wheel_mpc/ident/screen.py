@@ -48,7 +48,11 @@ bound of 100 (the truth about 20, 0.10 and 3).  From there and from the referenc
 with that braking gain, one step predicted nothing (chi^2 13) and nothing was named.  The
 short fit from the reference reached the noise floor (window RMSE 0.287 mrad against 0.626),
 chi^2 1309, and the refit named the torque (0.00397 N*m at 0.50 rad, held-out simulation
-error 1.76 -> 0.040 rad/s).  A fit that converged inside its ranges does not get this place.
+error 1.76 -> 0.040 rad/s).  The place counts with the error its fit reached, and the
+current model's own short fit from the same values (:func:`restart_from`, once per round)
+sets the baseline where it is lower than the current fit's, so that a candidate is not
+credited with what the restart alone gains.  A fit that converged inside its ranges does not
+get this place.
 
 The statistic is the best place's, not corrected for trying several: it only chooses what
 to refit, and the refit's held-out errors and Wald test decide.  (The scan's short fit makes
@@ -86,6 +90,21 @@ class Screening:
     predicted_rmse: float          # [rad] after the Gauss-Newton step
     start: dict[str, float]        # where a full fit should start (parameter name -> value)
     scanned: bool = False          # the best place was found by the scan (:func:`scan_places`)
+    restarted: bool = False        # the best place was the short fit from a :class:`Restart`
+
+
+@dataclass(frozen=True)
+class Restart:
+    """Where the candidates of a bent fit (:func:`bent`) are also fitted from, briefly.
+
+    ``values``: parameter name -> start value (the reference force law, tau_f, braking
+    gain); ``sse`` [rad^2]: the squared window error the current model itself reaches by the
+    same short fit from there (:func:`restart_from`).  Where that is below the current fit's
+    own, it is the baseline of every score, so that a candidate is not credited with what
+    the restart alone gains."""
+
+    values: dict[str, float]
+    sse: float
 
 
 def _sse(prob: Problem, values: dict[str, float], x_start: np.ndarray) -> float:
@@ -133,21 +152,25 @@ def scan_places(prob: Problem, candidate: Candidate, places: list[dict[str, floa
 @with_one_blas_thread
 def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...],
            current: FitResult, current_problem: Problem, candidate: Candidate,
-           window: float, reference: dict[str, float],
-           restart: dict[str, float] | None = None) -> Screening:
+           window: float, reference: dict[str, float], restart: Restart | None = None,
+           noise: tuple[float, float] | None = None) -> Screening:
     """Score test of ``candidate`` added to the model ``chosen`` fitted as ``current``.
 
     ``reference`` holds the second start's values (the reference force law, the current
     tau_f).  The window starts of ``current`` warm-start both.  ``restart`` (given when the
     current fit is bent: :func:`bent`) is one more place: a short fit
-    (:data:`SCAN_NFEV` evaluations) of the model with the candidate from those values, which
-    counts with the error it reached."""
+    (:data:`SCAN_NFEV` evaluations) of the model with the candidate from its values, which
+    counts with the error it reached.  ``noise``: the current fit's (residual variance
+    [rad^2], inflation) from :meth:`~.fit.Problem.noise`, computed here when None (give it
+    when screening from several threads: ``current_problem`` is not thread-safe)."""
     prob = Problem(trials, base, chosen + (candidate,), window)
     x_start = current_problem.window_starts(current.z)
     n_used = int(prob.ok.sum())
     sse0 = current.rmse ** 2 * n_used
-    s2, inflation = current_problem.noise(current_problem.residual(current.z),
-                                          len(current.names))
+    if restart is not None:
+        sse0 = min(sse0, restart.sse)
+    s2, inflation = noise or current_problem.noise(current_problem.residual(current.z),
+                                                   len(current.names))
     best: tuple[float, np.ndarray, np.ndarray, float, bool] | None = None
     places = [current.values, {**reference, **{k: v for k, v in current.values.items()
                                                if k not in reference}}]
@@ -169,12 +192,16 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
             hi = np.array([prob.specs[i].upper for i in prob.free])
             best = (sse, theta, np.clip(theta - scale * coef, lo, hi), float(r @ r),
                     k >= n_given)
+    assert best is not None
+    restarted = False
     if restart is not None:
         # the short fit's own error, not a step predicted from it: from that far a linear
         # step can promise a drop that no fit delivers
-        f = prob.fit(start={**current.values, **restart}, x0=x_start, max_nfev=SCAN_NFEV)
+        f = prob.fit(start={**current.values, **restart.values}, x0=x_start,
+                     max_nfev=SCAN_NFEV)
         if f.rmse ** 2 * n_used < best[0]:
-            best = (f.rmse ** 2 * n_used, f.theta, f.theta, f.rmse ** 2 * n_used, True)
+            best = (f.rmse ** 2 * n_used, f.theta, f.theta, f.rmse ** 2 * n_used, False)
+            restarted = True
     sse, theta, stepped, sse_here, scanned = best
     # the full fit starts from the better place for the force law (one linearised step can
     # overshoot its strongly nonlinear bump) and from the step for the candidate's own
@@ -184,7 +211,7 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     own = np.array([prob.names.index(p.name) for p in candidate.params if p.name in prob.names],
                    dtype=int)
     trial = theta.copy()
-    for shrink in range(6):                                  # step x 1, 1/4, ..., 1/1024
+    for shrink in range(0 if restarted else 6):              # step x 1, 1/4, ..., 1/1024
         trial[own] = theta[own] + (stepped[own] - theta[own]) * 0.25 ** shrink
         try:
             _, r_try, _, _ = prob.solve_starts(prob.full_theta(trial), x_start)
@@ -200,7 +227,16 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     return Screening(candidate.id, candidate.size, statistic,
                      float(stats.chi2.sf(statistic, candidate.size)),
                      float(stats.chi2.logsf(statistic, candidate.size) / math.log(10.0)),
-                     math.sqrt(max(sse, 0.0) / n_used), start, scanned)
+                     math.sqrt(max(sse, 0.0) / n_used), start, scanned, restarted)
+
+
+def restart_from(problem: Problem, fit: FitResult, values: dict[str, float]) -> Restart:
+    """The :class:`Restart` at ``values`` for the model of ``problem`` fitted as ``fit``: the
+    squared window error [rad^2] its own short fit (:data:`SCAN_NFEV` evaluations) from
+    ``values`` reaches, warm-started from ``fit``'s window starts."""
+    f = problem.fit(start={**fit.values, **values}, x0=problem.window_starts(fit.z),
+                    max_nfev=SCAN_NFEV)
+    return Restart(dict(values), f.rmse ** 2 * int(problem.ok.sum()))
 
 
 def bent(problem: Problem, fit: FitResult) -> str | None:

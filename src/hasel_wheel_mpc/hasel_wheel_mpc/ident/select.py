@@ -141,7 +141,7 @@ from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
 from .residual import Diagnostics, Signature, analyse, autocorrelation_signature
-from .screen import SCREEN_P, Screening, bent, screen
+from .screen import SCREEN_P, Screening, bent, restart_from, screen
 from .threads import with_one_blas_thread
 
 
@@ -654,12 +654,14 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         ref = dict(reference, tau_f=current.fit.values.get("tau_f", base.tau_f))
 
         crooked = bent(problem, current.fit)
-        restart = None if crooked is None else \
-            dict(reference, tau_f=friction.tau_f if friction else base.tau_f,
-                 brake_gain=base.brake_gain)
+        restart = None if crooked is None else restart_from(
+            problem, current.fit, dict(reference, tau_f=friction.tau_f if friction else
+                                       base.tau_f, brake_gain=base.brake_gain))
+        noise = problem.noise(problem.residual(current.fit.z), len(current.fit.names))
 
         def score(c: Candidate) -> Screening:
-            return screen(trials, base, chosen, current.fit, problem, c, window, ref, restart)
+            return screen(trials, base, chosen, current.fit, problem, c, window, ref, restart,
+                          noise)
 
         # the costliest screens first, so that the threads finish together (a place costs a
         # window solve, ~12 simulations, and a Jacobian, one per parameter; a scan up to

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -100,7 +101,7 @@ def encoder_trials(effects: dict, seed: int = 3, specs=SHORT_SET) -> list[Trial]
     return record_set(specs, config=cfg)
 
 
-def closed_loop_trials(effects: dict, profile: tuple[tuple[float, float], ...], duration: float,
+def closed_loop_trials(effects: Mapping[str, Any], profile: tuple[tuple[float, float], ...], duration: float,
                        seeds: tuple[int, ...], directory: Path) -> list[Trial]:
     """One run of the embedded closed loop (:func:`~hasel_wheel_mpc.closed_loop.run_closed_loop`,
     the paper's model in the controller) per plant seed in ``seeds``, on ``profile`` ((start
