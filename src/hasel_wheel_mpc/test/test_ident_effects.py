@@ -225,9 +225,10 @@ def test_a_slow_rise_lag_that_the_force_law_bends_to_mimic_is_found_by_the_scan(
     # reference at 5, 20 or 60 ms predicted little (chi^2 46, fourth of seven at the time): an angle
     # offset led and was refused, and a gain spread and charge retention were named.  The
     # rise lag's scan finds where the error is lowest, and its short fit starts the refit.
-    # (The nominal fit stops unconverged here, and the short fit from the reference force
-    # law (screen.bent) now reaches the same place, chi^2 376 with tau 117.6 ms.  Switched
-    # off, to test the scan, which serves fits that are not bent)
+    # (The nominal fit stops unconverged here, so the short fit from the reference force
+    # law (screen.bent) screens the rise lag too; with 8 evaluations it reached the scan's
+    # place, chi^2 376 at 117.6 ms.  Switched off, to test the scan, which also serves fits
+    # that are not bent)
     monkeypatch.setattr(SEL, "bent", lambda problem, fit: None)
     rise = {"rise_lag": {"enabled": True, "time_constant": {"value": 0.12, "unit": "s"}}}
     trials = _trials(rise, seed=7)

@@ -39,7 +39,7 @@ without the effect the scan finds nothing significant and adds no fit.
 
 A current fit that looks bent (:func:`bent`: it stopped at its evaluation limit, or a nominal
 parameter ended on a bound) gets one more place per candidate: a short fit
-(:data:`SCAN_NFEV` evaluations) of the model with the candidate, from the reference force
+(:data:`RESTART_NFEV` evaluations) of the model with the candidate, from the reference force
 law, tau_f and braking gain.  In a closed loop the pushes and brakes answer a disturbance,
 so the nominal force law can take much of it up.  Seen on `hasel_wheel demo --wheels 3
 --hold-scale 0.5` with a platform torque of 0.004 N*m (3 x 115 s, plant seed 3; ad hoc): the
@@ -47,7 +47,7 @@ nominal fit stopped after 100 evaluations at peak 257, width 0.021 and the braki
 bound of 100 (the truth about 20, 0.10 and 3).  From there and from the reference force law
 with that braking gain, one step predicted nothing (chi^2 13) and nothing was named.  The
 short fit from the reference reached the noise floor (window RMSE 0.287 mrad against 0.626),
-chi^2 1309, and the refit named the torque (0.00397 N*m at 0.50 rad, held-out simulation
+chi^2 1306 (4 evaluations; 1309 with 8), and the refit named the torque (0.00397 N*m at 0.50 rad, held-out simulation
 error 1.76 -> 0.040 rad/s).  The place counts with the error its fit reached, and the
 current model's own short fit from the same values (:func:`restart_from`, once per round)
 sets the baseline where it is lower than the current fit's, so that a candidate is not
@@ -76,6 +76,7 @@ from .threads import with_one_blas_thread
 
 SCREEN_P = 1e-6     # score-test p-value below which a candidate is refitted in full
 SCAN_NFEV = 8       # evaluations of the short fit from a scan's best point
+RESTART_NFEV = 4    # evaluations of the short fits from a Restart (a bent fit's candidates)
 
 
 @dataclass
@@ -159,7 +160,7 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     ``reference`` holds the second start's values (the reference force law, the current
     tau_f).  The window starts of ``current`` warm-start both.  ``restart`` (given when the
     current fit is bent: :func:`bent`) is one more place: a short fit
-    (:data:`SCAN_NFEV` evaluations) of the model with the candidate from its values, which
+    (:data:`RESTART_NFEV` evaluations) of the model with the candidate from its values, which
     counts with the error it reached.  ``noise``: the current fit's (residual variance
     [rad^2], inflation) from :meth:`~.fit.Problem.noise`, computed here when None (give it
     when screening from several threads: ``current_problem`` is not thread-safe)."""
@@ -198,7 +199,7 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
         # the short fit's own error, not a step predicted from it: from that far a linear
         # step can promise a drop that no fit delivers
         f = prob.fit(start={**current.values, **restart.values}, x0=x_start,
-                     max_nfev=SCAN_NFEV)
+                     max_nfev=RESTART_NFEV)
         if f.rmse ** 2 * n_used < best[0]:
             best = (f.rmse ** 2 * n_used, f.theta, f.theta, f.rmse ** 2 * n_used, False)
             restarted = True
@@ -232,10 +233,10 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
 
 def restart_from(problem: Problem, fit: FitResult, values: dict[str, float]) -> Restart:
     """The :class:`Restart` at ``values`` for the model of ``problem`` fitted as ``fit``: the
-    squared window error [rad^2] its own short fit (:data:`SCAN_NFEV` evaluations) from
+    squared window error [rad^2] its own short fit (:data:`RESTART_NFEV` evaluations) from
     ``values`` reaches, warm-started from ``fit``'s window starts."""
     f = problem.fit(start={**fit.values, **values}, x0=problem.window_starts(fit.z),
-                    max_nfev=SCAN_NFEV)
+                    max_nfev=RESTART_NFEV)
     return Restart(dict(values), f.rmse ** 2 * int(problem.ok.sum()))
 
 
