@@ -5,8 +5,9 @@ Search (forward selection).  Starting from the nominal model:
 
 1. **screen** every candidate not yet in the model: add it and refit by one Gauss-Newton
    step, a score test (:mod:`.screen`); when the current fit looks bent (it stopped
-   unconverged, or a nominal parameter ended on a bound: :func:`~.screen.bent`), also by a
-   short fit from the reference force law.  A candidate goes on when it is significant
+   unconverged, or a nominal parameter ended on a bound: :func:`~.screen.bent`) and either
+   the trials have no coast-down or a parameter is on its bound, also by a short fit from
+   the reference force law.  A candidate goes on when it is significant
    (p < ``SCREEN_P``) and either is predicted to cut the window RMSE by at least half of
    ``min_gain`` or belongs to a *dominant* group of at most ``max_refits``: each member at
    least twice as significant (in -log10 p) as every candidate outside (:func:`dominant`).
@@ -653,7 +654,15 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         problem = Problem(trials, base, chosen, window)
         ref = dict(reference, tau_f=current.fit.values.get("tau_f", base.tau_f))
 
+        # a bent fit's candidates are also fitted briefly from the reference force law, where
+        # nothing anchors the fit: no coast-down pins tau_f (closed-loop runs, where the pushes
+        # answer the disturbance), or a parameter ran onto its bound.  Open-loop trials with
+        # coast-downs whose fit only stopped unconverged keep the steps, the scan and the
+        # second start, which name their effects (bench_ident_effects.py gave the same choices
+        # with the short fits, at up to 9 s more per screening on 5 x 60 s)
         crooked = bent(problem, current.fit)
+        if friction is not None and not problem.at_bounds(current.fit):
+            crooked = None
         restart = None if crooked is None else restart_from(
             problem, current.fit, dict(reference, tau_f=friction.tau_f if friction else
                                        base.tau_f, brake_gain=base.brake_gain))
