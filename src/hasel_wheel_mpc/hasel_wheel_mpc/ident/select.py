@@ -659,7 +659,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # answer the disturbance), or a parameter ran onto its bound.  Open-loop trials with
         # coast-downs whose fit only stopped unconverged keep the steps, the scan and the
         # second start, which name their effects (bench_ident_effects.py gave the same choices
-        # with the short fits, at up to 9 s more per screening on 5 x 60 s)
+        # with the short fits; one screening of 5 x 60 s trials took 12 s with them, ad hoc)
         crooked = bent(problem, current.fit)
         if friction is not None and not problem.at_bounds(current.fit):
             crooked = None
