@@ -230,6 +230,11 @@ def closed_loop_com(tmp_path_factory):
     return S.closed_loop_trials(COM, PROFILE, 45.0, (3, 4), tmp_path_factory.mktemp("loop"))
 
 
+#: the tests that read closed_loop_com run on one worker (./dev test runs pytest-xdist),
+#: which simulates it once
+ON_LOOP_WORKER = pytest.mark.xdist_group("closed_loop_com")
+
+
 def _closed_loop_consistency(trials, cid: str) -> K.Consistency:
     base = WheelParams()
     eff = (C.BY_ID[cid],)
@@ -238,6 +243,7 @@ def _closed_loop_consistency(trials, cid: str) -> K.Consistency:
     return K.trial_consistency(trials, base, eff, fit, eff[0])
 
 
+@ON_LOOP_WORKER
 def test_spans_are_cut_between_pushes_only_when_the_trials_share_their_speed(closed_loop_com):
     speeds = [K.driven_speed(tr) for tr in closed_loop_com]
     assert max(speeds) < 1.05 * min(speeds)
@@ -258,6 +264,7 @@ def test_spans_are_cut_between_pushes_only_when_the_trials_share_their_speed(clo
     assert K.speed_units(S.encoder_trials({}, 3)) == []
 
 
+@ON_LOOP_WORKER
 def test_a_reading_error_standing_in_for_an_off_centre_mass_falls_with_speed_span_by_span(
         closed_loop_com):
     right = _closed_loop_consistency(closed_loop_com, "com_offset")

@@ -43,6 +43,11 @@ def com_identification():
     return SEL.identify(_trials(COM), k_folds=3, max_effects=2)
 
 
+#: the tests that read com_identification run on one worker (./dev test runs pytest-xdist),
+#: which fits it once
+ON_COM_WORKER = pytest.mark.xdist_group("com_identification")
+
+
 def test_speed_from_angle_is_exact_on_a_parabola():
     # a quadratic Savitzky-Golay derivative reproduces a parabola's slope exactly
     t = np.arange(0, 2, 1 / 300)
@@ -64,6 +69,7 @@ def test_the_true_model_reproduces_an_exact_trial():
     assert bad.rmse > 3 * good.rmse
 
 
+@ON_COM_WORKER
 def test_an_undeclared_com_offset_is_named_measured_and_halves_the_error(com_identification):
     res = com_identification
     assert res.chosen == ("com_offset",)
@@ -614,6 +620,7 @@ def test_an_effect_outside_the_library_is_reported_not_forced():
     assert sig[0].torque_ci95[0] < 0.004 < sig[0].torque_ci95[1]
 
 
+@ON_COM_WORKER
 def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identification,
                                                                      tmp_path):
     data = write_report(com_identification, tmp_path)
@@ -657,6 +664,7 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     assert f"identified fit converged after {final['evaluations']} evaluations" in md
 
 
+@ON_COM_WORKER
 def test_a_fit_stopped_at_its_limit_is_reported_as_not_converged(com_identification):
     ev = dataclasses.replace(com_identification.nominal, fit=dataclasses.replace(
         com_identification.nominal.fit, converged=False, nfev=100,
@@ -666,6 +674,7 @@ def test_a_fit_stopped_at_its_limit_is_reported_as_not_converged(com_identificat
     assert "converged after" in fit_status_text(com_identification.final, "identified")
 
 
+@ON_COM_WORKER
 def test_the_one_step_prediction_residual_is_white_only_with_the_missing_effect(
         com_identification):
     # the observer's innovations under the nominal model stay correlated over many samples

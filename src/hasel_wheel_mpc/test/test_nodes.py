@@ -12,7 +12,9 @@ from hasel_wheel_driver import topics
 from hasel_wheel_driver.ros_sandbox import ros_graph_unavailable
 
 REASON = ros_graph_unavailable()
-pytestmark = pytest.mark.skipif(REASON is not None, reason=str(REASON))
+#: one worker runs every test here (./dev test runs pytest-xdist): one ROS graph at a time
+pytestmark = [pytest.mark.skipif(REASON is not None, reason=str(REASON)),
+              pytest.mark.xdist_group("ros_graph")]
 
 NODES = [("hasel_wheel_driver.driver_node", "DriverNode"),
          ("hasel_wheel_sim.sim_node", "SimNode"),
