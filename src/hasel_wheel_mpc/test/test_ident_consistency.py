@@ -1,5 +1,6 @@
 """An effect refitted trial by trial (ident/consistency.py): the trend of its size with the
 trials' speed against its closed form, and on plant data the right effect against a stand-in."""
+import dataclasses
 import math
 
 import numpy as np
@@ -141,6 +142,29 @@ def test_a_drift_within_the_trials_is_a_caution_not_a_refusal(p, h, expected):
     assert K.drifts(c) is expected
     assert (K.drift_caution(C.BY_ID["rise_lag"], c) is not None) is expected
     assert not K.inconsistent(c) and K.stand_in_reason(C.BY_ID["rise_lag"], c) is None
+
+
+@pytest.mark.parametrize("trend_p, k, leans, refused", [
+    (2.5e-3, 1.42, True, False), (2.5e-3, -0.8, True, False),   # a lean either way: caution
+    (2.5e-3, 0.3, False, False),      # significant but flatter than speed^0.5: nothing
+    (0.02, 1.42, False, False),       # steep but not unlikely enough by chance: nothing
+    (1e-4, 1.42, False, True)])       # past TREND_P: refused as a stand-in, not cautioned
+def test_a_lean_on_the_speed_short_of_refusal_is_a_caution(trend_p, k, leans, refused):
+    c = K.Consistency("charge_retention", ["rate"], ["a", "b", "c"], np.full((3, 1), 0.07),
+                      np.full((3, 1), 0.01), np.full(1, 0.07), 10.0, 2, 0.006,
+                      [3.1, 2.6, 2.1], k, 0.5, trend_p)
+    cand = C.BY_ID["charge_retention"]
+    assert K.leans(c) is leans and K.inconsistent(c) is refused
+    assert (K.stand_in_reason(cand, c) is not None) is refused
+    why = K.caution(cand, c)
+    assert (why is not None) is leans
+    if leans:
+        assert why.startswith("charge_retention goes with the speed, refitted trial by trial")
+        assert f"k = {k:+.2f}" in why and "may stand in for an effect whose size goes" in why
+    # with a drift as well, both sentences, the lean first
+    both = K.caution(cand, dataclasses.replace(c, drift=0.09, drift_sd=0.01, drift_p=1e-4))
+    assert ("goes with the speed" in both) is leans and "not the same throughout" in both
+    assert both.find("goes with the speed") < both.find("not the same throughout")
 
 
 RETENTION = {"charge_retention": {"enabled": True, "rate": {"value": 0.2, "unit": "1/s"},

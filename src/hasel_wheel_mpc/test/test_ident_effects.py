@@ -434,6 +434,23 @@ def test_a_rise_lag_outside_the_library_on_short_trials_leaves_a_drift_along_spe
     assert res.diagnostics_after.trend.p_value < 1e-20
 
 
+def test_retention_named_for_a_rise_lag_outside_the_library_carries_a_caution_on_the_speed():
+    # 3 x 34 s, plant seed 11: retention is still named for the 40 ms rise lag (README,
+    # known gaps: on these three trials the speed and the HV time rise together, and the
+    # refit trial by trial reads k = +1.42 +- 0.48, p = 0.0025, short of the refusal's 1e-3).
+    # The report says so beside it: a caution that its size goes with the speed.  When a
+    # change stops naming retention here, this test is to be rewritten, not deleted.
+    rise = {"rise_lag": {"enabled": True, "time_constant": {"value": 0.04, "unit": "s"}}}
+    res = SEL.identify(_trials(rise, seed=11), k_folds=3, library=C.library(exclude=["rise_lag"]))
+    assert res.chosen == ("charge_retention",)
+    con = res.consistency["charge_retention"]
+    assert con.exponent > 0.5 and 1e-3 < con.trend_p < 1e-2
+    entry = next(e for e in to_json(res, [], [])["effects"] if e["id"] == "charge_retention")
+    why = entry["consistency"]["caution"]
+    assert why.startswith("charge_retention goes with the speed, refitted trial by trial")
+    assert "may stand in for an effect whose size goes with the speed" in why
+
+
 def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measured_loss():
     # retention of 0.2/s with its candidate left out, 3 x 34 s (plant seed 11): a rise lag
     # cuts the held-out error (0.088 -> 0.056 rad/s, ad hoc) and was named, with a caution.

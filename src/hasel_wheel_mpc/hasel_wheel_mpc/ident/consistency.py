@@ -148,6 +148,12 @@ MIN_SPAN_SAMPLES = 30
 #: A change within the trials this unlikely by chance (p < TREND_P, two-sided), and steeper
 #: than size ~ hv^DRIFT, is reported as a caution (:func:`drifts`).
 DRIFT = 0.05
+#: A trend with the trials' speed this unlikely by chance (two-sided), steeper than
+#: speed^(+-EXPONENT) but short of TREND_P, is reported as a caution (:func:`leans`), not
+#: refused.  On 3 x 34 s (plant seeds 11-14, ad hoc) retention named in place of a 40 ms rise
+#: lag outside the library read p = 0.0025, 0.045, refused, 0.005 (k = +1.0 to +1.5), and the
+#: right models of seven effects p >= 0.015 (42 runs, module docstring).
+LEAN_P = 1e-2
 
 
 @dataclass
@@ -523,6 +529,31 @@ def stand_in_reason(c: Candidate, con: Consistency | None) -> str | None:
     return (f"{c.id} is not the same {how}: {con.text(c)}; a physical {c.id} would be one "
             f"value at every speed, so it stands in for an effect whose size goes otherwise "
             f"with the speed")
+
+
+def leans(c: Consistency | None) -> bool:
+    """True when the effect's size trends with the trials' speed (p < LEAN_P, steeper than
+    speed^(+-EXPONENT)) short of :func:`inconsistent`: evidence, not enough to refuse it."""
+    return (c is not None and c.trend_p < LEAN_P and abs(c.exponent) > EXPONENT
+            and not inconsistent(c))
+
+
+def lean_caution(c: Candidate, con: Consistency | None) -> str | None:
+    """A caution when ``c``, refitted trial by trial as ``con``, :func:`leans` on the speed;
+    None otherwise."""
+    if not leans(con):
+        return None
+    by = "trial by trial" if con.unit == "trial" else "span by span"
+    return (f"{c.id} goes with the speed, refitted {by}: {con.text(c)}; short of a refusal "
+            f"(p < {TREND_P:.0e}), but a physical {c.id} would be one value at every speed, "
+            f"so it may stand in for an effect whose size goes with the speed (trials at "
+            f"more speeds, or with longer drives at a steady speed, would tell)")
+
+
+def caution(c: Candidate, con: Consistency | None) -> str | None:
+    """Every caution on ``c`` refitted as ``con`` (:func:`lean_caution`,
+    :func:`drift_caution`), one sentence each; None when there is none."""
+    return " ".join(f"{s}." for s in (lean_caution(c, con), drift_caution(c, con)) if s) or None
 
 
 def drift_caution(c: Candidate, con: Consistency | None) -> str | None:

@@ -24,9 +24,10 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             differ by less than 1.2x ("span", each drive cut in up to
                             six), size ~ speed^k, and on the halves of each drive (size ~
                             hv^h), as checked when it was added (ident/consistency.py);
-                            caution is a sentence when it changes within the trials,
-                            else null; an exponent and its p are null where they cannot
-                            be formed; beside_hv_loss {rate_per_s, values, wald_p,
+                            caution: a sentence for each warning (its size leans on
+                            the speed short of refusal, or changes within the
+                            trials), else null; an exponent and its p are null where
+                            they cannot be formed; beside_hv_loss {rate_per_s, values, wald_p,
                             sim_rmse_rad_s, sim_rmse_without_rad_s}: a drifting effect
                             refitted beside a force loss growing with HV time (the
                             device's rate, the effect's own parameters there by name in
@@ -103,7 +104,7 @@ from hasel_wheel_sim.model_file import save_model
 
 from . import plots
 from .candidates import BY_ID, Candidate
-from .consistency import Consistency, drift_caution
+from .consistency import Consistency, caution
 from .data import find_coasts
 from ..paper import TABLE_III
 from .metrics import TrialMetrics, pooled_rmse
@@ -310,7 +311,7 @@ def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
                                 "sim_rmse_rad_s": _num(con.beside_sim[0]),
                                 "sim_rmse_without_rad_s": _num(con.beside_sim[1])}
                                if math.isfinite(con.beside_p) else None),
-            "caution": drift_caution(c, con)}
+            "caution": caution(c, con)}
 
 
 def _ci(ci: list) -> str:
