@@ -41,7 +41,7 @@ from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import metrics as M
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
-from hasel_wheel_mpc.ident.consistency import drift_caution
+from hasel_wheel_mpc.ident.consistency import caution, leans
 from hasel_wheel_mpc.model_compare import compare_controllers
 from hasel_wheel_mpc.observer import ObserverConfig
 from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
@@ -280,8 +280,9 @@ def run_outside_library() -> None:
                  f"drift along {tr.axis} (p = {tr.p_value:.1e}; "
                  + ", ".join(f"{k} {v:.1e}" for k, v in tr.p_values.items() if k != tr.axis)
                  + ")")
-        cautions = [f"{i}: h = {c.drift:+.2f} +- {c.drift_sd:.2f} (p = {c.drift_p:.1e})"
-                    for i, c in res.consistency.items()]
+        cautions = [f"{i}: k = {c.exponent:+.2f} +- {c.exponent_sd:.2f} (p = {c.trend_p:.1e}"
+                    f"{', leans on the speed: caution' if leans(c) else ''}), h = {c.drift:+.2f} "
+                    f"+- {c.drift_sd:.2f} (p = {c.drift_p:.1e})" for i, c in res.consistency.items()]
         others = [f"{s.axis} {s.period:.3g}" if s.period is not None else s.axis
                   for s in res.diagnostics_after.signatures if not SEL.drift_signature(s)]
         # the look-alikes refused beside the HV-time loss (consistency.drift_stand_in)
@@ -351,7 +352,7 @@ def run_realistic() -> None:
                  + f", Wald p {con.beside_p:.1e}, free run {con.beside_sim[0]:.4f} rad/s "
                  f"against {con.beside_sim[1]:.4f} without it"
                  if math.isfinite(con.beside_p) else "")
-              + ("; caution" if drift_caution(C.BY_ID[cid], con) else ""))
+              + ("; caution" if caution(C.BY_ID[cid], con) else ""))
 
 
 def main() -> None:

@@ -147,7 +147,7 @@ def test_a_drift_within_the_trials_is_a_caution_not_a_refusal(p, h, expected):
 @pytest.mark.parametrize("trend_p, k, leans, refused", [
     (2.5e-3, 1.42, True, False), (2.5e-3, -0.8, True, False),   # a lean either way: caution
     (2.5e-3, 0.3, False, False),      # significant but flatter than speed^0.5: nothing
-    (0.02, 1.42, False, False),       # steep but not unlikely enough by chance: nothing
+    (0.012, 1.42, False, False),      # steep but not unlikely enough by chance: nothing
     (1e-4, 1.42, False, True)])       # past TREND_P: refused as a stand-in, not cautioned
 def test_a_lean_on_the_speed_short_of_refusal_is_a_caution(trend_p, k, leans, refused):
     c = K.Consistency("charge_retention", ["rate"], ["a", "b", "c"], np.full((3, 1), 0.07),
@@ -164,7 +164,9 @@ def test_a_lean_on_the_speed_short_of_refusal_is_a_caution(trend_p, k, leans, re
     # with a drift as well, both sentences, the lean first
     both = K.caution(cand, dataclasses.replace(c, drift=0.09, drift_sd=0.01, drift_p=1e-4))
     assert ("goes with the speed" in both) is leans and "not the same throughout" in both
-    assert both.find("goes with the speed") < both.find("not the same throughout")
+    if leans:
+        assert 0 < both.index("goes with the speed") < both.index("not the same throughout")
+    assert ".." not in both and both.endswith(".")
 
 
 RETENTION = {"charge_retention": {"enabled": True, "rate": {"value": 0.2, "unit": "1/s"},

@@ -88,6 +88,13 @@ is not a refusal: it is reported with the chosen effect as a caution
 to a 40 ms rise lag does not drift (h = +0.04..+0.08, p >= 0.12): both losses grow through
 each drive.
 
+Short of a refusal.  A trend with speed steeper than speed^(+-EXPONENT) with p between TREND_P
+and LEAN_P is not enough to refuse an effect (the right models' p reach down to 0.015), but
+it is reported with the chosen effect as a caution (:func:`leans`, :func:`lean_caution`;
+:func:`caution` gives every caution).  On three short trials the speed and the HV time rise
+together, within each drive and across the trials, so a retention named for a rise lag
+there leans on the speed without reaching TREND_P (README, Known gaps).
+
 Beside a measured drift.  A drift alone cannot say which of the two it is, but a refit can:
 the effect that drifts is refitted once more beside a force loss that grows with the
 accumulated HV time (:data:`HV_LOSS`, charge retention's form without recovery, one
