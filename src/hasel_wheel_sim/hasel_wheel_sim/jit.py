@@ -8,7 +8,11 @@ variable ``HASEL_WHEEL_NO_JIT=1`` to force the interpreted path (useful for debu
 Compiled code is cached on disk.  numba invalidates a cached function only when its own
 source file changes, not when a constant it uses from another module does (our index
 layout lives in ``layout.py``), so the cache directory is keyed by a hash of every source
-file of the compiled core.
+file of the compiled core.  It lies under ``HASEL_WHEEL_JIT_CACHE`` when that names a
+writable directory, else beside this file, else in the temporary directory.  numba does not
+lock its cache index: two processes that save two signatures of one function at the same
+moment can pair an entry with the other's code, so processes that compile at the same time
+(the test suite's workers) should each have their own directory (the project's conftest.py).
 """
 from __future__ import annotations
 
@@ -37,7 +41,9 @@ def _cache_dir() -> str:
     for name in _CORE_FILES:
         digest.update((here / name).read_bytes())
     key = f"numba-{digest.hexdigest()[:16]}"
-    for base in (here / "__pycache__", Path(tempfile.gettempdir()) / "hasel_wheel_sim"):
+    own = os.environ.get("HASEL_WHEEL_JIT_CACHE")
+    for base in ((Path(own),) if own else ()) + (here / "__pycache__",
+                                                 Path(tempfile.gettempdir()) / "hasel_wheel_sim"):
         try:
             d = base / key
             d.mkdir(parents=True, exist_ok=True)
