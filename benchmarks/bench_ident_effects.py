@@ -282,7 +282,8 @@ def run_outside_library() -> None:
                  + ")")
         cautions = [f"{i}: k = {c.exponent:+.2f} +- {c.exponent_sd:.2f} (p = {c.trend_p:.1e}"
                     f"{', leans on the speed: caution' if leans(c) else ''}), h = {c.drift:+.2f} "
-                    f"+- {c.drift_sd:.2f} (p = {c.drift_p:.1e})" for i, c in res.consistency.items()]
+                    f"+- {c.drift_sd:.2f} (p = {c.drift_p:.1e})"
+                    for i, c in res.consistency.items()]
         others = [f"{s.axis} {s.period:.3g}" if s.period is not None else s.axis
                   for s in res.diagnostics_after.signatures if not SEL.drift_signature(s)]
         # the look-alikes refused beside the HV-time loss (consistency.drift_stand_in)

@@ -37,24 +37,24 @@ still predicted nothing, but at the reference force law the error is lowest near
 the refit that named the rise lag (117.6 ms, held-out simulation error 4.2x lower).  On data
 without the effect the scan finds nothing significant and adds no fit.
 
-A current fit that looks bent (:func:`bent`: it stopped at its evaluation limit, or a nominal
-parameter ended on a bound) gets one more place per candidate: a short fit
+A current fit that looks bent (:func:`bent`: it stopped at its evaluation limit, or a
+nominal parameter ended on a bound) gets one more place per candidate: a short fit
 (:data:`RESTART_NFEV` evaluations) of the model with the candidate, from the reference force
-law, tau_f and braking gain.  In a closed loop the pushes and brakes answer a disturbance,
-so the nominal force law can take much of it up.  Seen on `hasel_wheel demo --wheels 3
+law, tau_f and braking gain. In a closed loop the pushes and brakes answer a disturbance, so
+the nominal force law can take much of it up. Seen on `hasel_wheel demo --wheels 3
 --hold-scale 0.5` with a platform torque of 0.004 N*m (3 x 115 s, plant seed 3; ad hoc): the
-nominal fit stopped after 100 evaluations at peak 257, width 0.021 and the braking gain on its
-bound of 100 (the truth about 20, 0.10 and 3).  From there and from the reference force law
-with that braking gain, one step predicted nothing (chi^2 13) and nothing was named.  The
+nominal fit stopped after 100 evaluations at peak 257, width 0.021 and the braking gain on
+its bound of 100 (the truth about 20, 0.10 and 3). From there and from the reference force
+law with that braking gain, one step predicted nothing (chi^2 13) and nothing was named. The
 short fit from the reference reached the noise floor (window RMSE 0.287 mrad against 0.626),
-chi^2 1306 (4 evaluations; 1309 with 8), and the refit named the torque (0.00397 N*m at 0.50 rad, held-out simulation
-error 1.76 -> 0.040 rad/s).  The place counts with the error its fit reached, and the
-current model's own short fit from the same values (:func:`restart_from`, once per round)
-sets the baseline where it is lower than the current fit's, so that a candidate is not
-credited with what the restart alone gains.  A fit that converged inside its ranges does not
-get this place, nor does one on trials with coast-downs that only stopped unconverged
-(:func:`~.select.identify`: there the steps, the scan and the second start name the effects,
-and the short fits only cost time).
+chi^2 1306 (4 evaluations; 1309 with 8), and the refit named the torque (0.00397 N*m at 0.50
+rad, held-out simulation error 1.76 -> 0.040 rad/s). The place counts with the error its fit
+reached (:func:`short_fit`), and the current model's own short fit from the same values
+(:func:`restart_from`, once per round) sets the baseline where it is lower than the current
+fit's, so that a candidate is not credited with what the restart alone gains. A fit that
+converged inside its ranges does not get this place, nor does one on trials with coast-downs
+that only stopped unconverged (:func:`~.select.identify`: there the steps, the scan and the
+second start name the effects, and the short fits only cost time).
 
 The statistic is the best place's, not corrected for trying several: it only chooses what
 to refit, and the refit's held-out errors and Wald test decide.  (The scan's short fit makes
@@ -200,10 +200,9 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
     if restart is not None:
         # the short fit's own error, not a step predicted from it: from that far a linear
         # step can promise a drop that no fit delivers
-        f = prob.fit(start={**current.values, **restart.values}, x0=x_start,
-                     max_nfev=RESTART_NFEV)
-        if f.rmse ** 2 * n_used < best[0]:
-            best = (f.rmse ** 2 * n_used, f.theta, f.theta, f.rmse ** 2 * n_used, False)
+        f, sse_f = short_fit(prob, current.values, restart.values, x_start)
+        if sse_f < best[0]:
+            best = (sse_f, f.theta, f.theta, sse_f, False)
             restarted = True
     sse, theta, stepped, sse_here, scanned = best
     # the full fit starts from the better place for the force law (one linearised step can
@@ -233,13 +232,20 @@ def screen(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...]
                      math.sqrt(max(sse, 0.0) / n_used), start, scanned, restarted)
 
 
+def short_fit(prob: Problem, current: dict[str, float], values: dict[str, float],
+              x_start: np.ndarray) -> tuple[FitResult, float]:
+    """The short fit (:data:`RESTART_NFEV` evaluations) of ``prob`` from ``values`` (the
+    current fit's ``current`` values for the rest), warm-started at the window starts
+    ``x_start``; and its squared window error [rad^2]."""
+    f = prob.fit(start={**current, **values}, x0=x_start, max_nfev=RESTART_NFEV)
+    return f, f.rmse ** 2 * int(prob.ok.sum())
+
+
 def restart_from(problem: Problem, fit: FitResult, values: dict[str, float]) -> Restart:
     """The :class:`Restart` at ``values`` for the model of ``problem`` fitted as ``fit``: the
-    squared window error [rad^2] its own short fit (:data:`RESTART_NFEV` evaluations) from
-    ``values`` reaches, warm-started from ``fit``'s window starts."""
-    f = problem.fit(start={**fit.values, **values}, x0=problem.window_starts(fit.z),
-                    max_nfev=RESTART_NFEV)
-    return Restart(dict(values), f.rmse ** 2 * int(problem.ok.sum()))
+    squared window error [rad^2] its own :func:`short_fit` from ``values`` reaches."""
+    _, sse = short_fit(problem, fit.values, values, problem.window_starts(fit.z))
+    return Restart(dict(values), sse)
 
 
 def bent(problem: Problem, fit: FitResult) -> str | None:

@@ -101,8 +101,8 @@ def encoder_trials(effects: dict, seed: int = 3, specs=SHORT_SET) -> list[Trial]
     return record_set(specs, config=cfg)
 
 
-def closed_loop_trials(effects: Mapping[str, Any], profile: tuple[tuple[float, float], ...], duration: float,
-                       seeds: tuple[int, ...], directory: Path) -> list[Trial]:
+def closed_loop_trials(effects: Mapping[str, Any], profile: tuple[tuple[float, float], ...],
+                       duration: float, seeds: tuple[int, ...], directory: Path) -> list[Trial]:
     """One run of the embedded closed loop (:func:`~hasel_wheel_mpc.closed_loop.run_closed_loop`,
     the paper's model in the controller) per plant seed in ``seeds``, on ``profile`` ((start
     [s], reference [rad/s]), ...) for ``duration`` [s], on a plant with :data:`ENCODER` and
