@@ -348,11 +348,7 @@ def run_realistic() -> None:
         print(f"  {cid}: size ~ speed^k, k = {con.exponent:+.2f} +- {con.exponent_sd:.2f} "
               f"(p = {con.trend_p:.1e}); size ~ hv^h, h = {con.drift:+.2f} +- "
               f"{con.drift_sd:.2f} (p = {con.drift_p:.1e})"
-              + (f"; beside the HV-time loss (rate {con.beside_rate:.3g}/s): "
-                 + ", ".join(f"{k} {v:.4g}" for k, v in con.beside_values.items())
-                 + f", Wald p {con.beside_p:.1e}, free run {con.beside_sim[0]:.4f} rad/s "
-                 f"against {con.beside_sim[1]:.4f} without it"
-                 if math.isfinite(con.beside_p) else "")
+              + "".join(f"; {b.text(cid)}" for b in (con.beside, con.beside_lag) if b)
               + ("; caution" if caution(C.BY_ID[cid], con) else ""))
 
 

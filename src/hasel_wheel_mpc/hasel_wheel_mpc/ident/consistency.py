@@ -109,12 +109,31 @@ the right drag, fourth in the model, stayed at c = 4.91e-4 (the truth 5e-4), p =
 and cut that error from 0.0487 to 0.0333 rad/s (the device took 0.0112/s, the plant's
 retention is 0.01/s; bench_ident_effects.py prints it).  Ad hoc, a right 40 ms rise lag
 stayed at 41 ms beside the device.
+
+Beside a force that builds up after each switch-on.  An effect whose size grows with the
+trials' speed short of a refusal may stand in for a loss at each switch-on: a force that
+builds up over a time constant takes a fixed bite out of every push, so a larger share of
+the shorter pushes at speed.  On three short trials, where the speed and the HV time rise
+together, retention fitted to a 40 ms rise lag grew so (k = +0.99 to +1.59, p = 6e-4 to
+0.045 over plant seeds 11, 12, 14-16; ad hoc) and was named.  So an effect that grows with
+the speed (:func:`grows_with_speed`: k > :data:`EXPONENT`, p < :data:`SEEK_P`) is refitted
+once more beside :data:`ON_LAG` (rise lag's form, one parameter, a measuring device: never
+chosen, never written to model.yaml) and refused when it no longer holds there
+(:func:`lag_stand_in`, the rule of :meth:`Beside.holds`).  Ad hoc, 3 x 34 s: on the rise-lag
+data of seeds 11-16 the device took 39-41 ms and retention's Wald p there was 0.23 to 0.50,
+the free run within 3.3 % of the device's alone; the right retention of 0.1/s (seeds 3,
+11-16) kept p <= 5e-7 and a cut of 14 % or more, the right drag of 1e-3 and gain spread
+of 0.08 p <= 1e-80 and 23 % or more.  Weak retention (0.05/s) is close enough in shape to
+a 15 ms lag for the device to take it up on these short drives (p up to 0.5 in six seeds),
+so where such a retention grows with the speed (seed 13, k = +2.03, p = 0.004) it is
+refused beside the device.
 """
 from __future__ import annotations
 
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy import stats
@@ -125,7 +144,7 @@ from hasel_wheel_sim import layout as L
 
 from .candidates import Candidate, ParamSpec
 from .data import Trial, hv_time
-from .fit import FitResult, Problem, wald_p
+from .fit import FitResult, Problem, effect_wald_p
 from .metrics import fitted_metrics, pooled_rmse
 
 #: The nominal model's parameters (:func:`~.fit.nominal_specs`), refitted in each trial too.
@@ -161,6 +180,40 @@ DRIFT = 0.05
 #: lag outside the library read p = 0.0025, 0.045, refused, 0.005 (k = +1.0 to +1.5), and the
 #: right models of seven effects p >= 0.015 (42 runs, module docstring).
 LEAN_P = 1e-2
+
+
+@dataclass
+class Beside:
+    """An effect refitted beside a measuring device (:func:`refit_beside`): ``value`` the
+    device's one parameter in its unit, ``values`` the effect's own values there (each in its
+    unit), ``p`` the effect's Wald p there (:func:`~.fit.effect_wald_p`), and ``sim`` the
+    pooled free-run error on all trials [rad/s] with the effect and without it (the device
+    alone)."""
+
+    device: Candidate
+    value: float
+    values: dict[str, float]
+    p: float
+    sim: tuple[float, float]
+
+    def holds(self, min_gain: float) -> bool:
+        """Whether the effect still holds beside the device: its Wald p under
+        :data:`BESIDE_P`, and it cuts the free run on all trials by half of ``min_gain`` (a
+        fraction) or more against the device alone."""
+        e1, e0 = self.sim
+        return self.p < BESIDE_P and 1.0 - e1 / e0 >= 0.5 * min_gain
+
+    def text(self, effect: str, min_gain: float | None = None) -> str:
+        """The refit in words; with ``min_gain``, what :meth:`holds` needs."""
+        e1, e0 = self.sim
+        need = ((f" (need < {BESIDE_P:.0e})", f", need {50 * min_gain:.0f} %")
+                if min_gain is not None else ("", ""))
+        cut = 1.0 - e1 / e0
+        noun, value = DEVICE_WORDS[self.device.id]
+        return (f"refitted beside {noun} ({value(self.value)}, a measuring "
+                f"device; Wald p of {effect} {self.p:.1e}{need[0]}, the free run on all "
+                f"trials {e1:.4f} rad/s against {e0:.4f} without it, "
+                f"{'a cut' if cut >= 0 else 'a rise'} of {100 * abs(cut):.1f} %{need[1]})")
 
 
 @dataclass
@@ -205,14 +258,10 @@ class Consistency:
     drift: float = 0.0
     drift_sd: float = math.inf
     drift_p: float = 1.0
-    #: refitted beside :data:`HV_LOSS` (:func:`drift_stand_in`): the device's rate [1/s],
-    #: the effect's own values there (each in its unit), its Wald p there, and the pooled
-    #: free-run error on all trials [rad/s] with the effect and without it (the device
-    #: alone); nan and empty when not refitted
-    beside_rate: float = math.nan
-    beside_values: dict[str, float] = field(default_factory=dict)
-    beside_p: float = math.nan
-    beside_sim: tuple[float, float] = (math.nan, math.nan)
+    #: refitted beside :data:`HV_LOSS` (:func:`drift_stand_in`); None when not refitted
+    beside: Beside | None = None
+    #: refitted beside :data:`ON_LAG` (:func:`lag_stand_in`); None when not refitted
+    beside_lag: Beside | None = None
 
     def text(self, candidate: Candidate) -> str:
         """The per-trial values in words, slowest trial first."""
@@ -228,21 +277,6 @@ class Consistency:
         return (", ".join(rows) + f": size ~ speed^k, k = {self.exponent:+.2f} +- "
                 f"{self.exponent_sd:.2f} (p = {self.trend_p:.1e} for no trend); chi2 "
                 f"{self.chi2:.1f} on {self.dof} dof about one value (p = {self.p:.1e})")
-
-    def beside_text(self, min_gain: float | None = None) -> str:
-        """The refit beside :data:`HV_LOSS` in words ('' when there was none); with
-        ``min_gain``, what :func:`drift_stand_in` needed."""
-        if not math.isfinite(self.beside_p):
-            return ""
-        e1, e0 = self.beside_sim
-        need = ((f" (need < {BESIDE_P:.0e})", f", need {50 * min_gain:.0f} %")
-                if min_gain is not None else ("", ""))
-        cut = 1.0 - e1 / e0
-        return (f"refitted beside a force loss that grows with the accumulated HV time (rate "
-                f"{self.beside_rate:.3g}/s, a measuring device; Wald p of {self.effect} "
-                f"{self.beside_p:.1e}{need[0]}, the free run on all trials {e1:.4f} rad/s "
-                f"against {e0:.4f} without it, "
-                f"{'a cut' if cut >= 0 else 'a rise'} of {100 * abs(cut):.1f} %{need[1]})")
 
     def drift_text(self) -> str:
         """The change within the trials in words."""
@@ -551,10 +585,12 @@ def lean_caution(c: Candidate, con: Consistency | None) -> str | None:
     if not leans(con):
         return None
     by = "trial by trial" if con.unit == "trial" else "span by span"
+    beside = ("" if con.beside_lag is None else
+              f"; {con.beside_lag.text(c.id)}: there it still holds")
     return (f"{c.id} goes with the speed, refitted {by}: {con.text(c)}; short of a refusal "
             f"(p < {TREND_P:.0e}), but a physical {c.id} would be one value at every speed, "
             f"so it may stand in for an effect whose size goes with the speed (trials at "
-            f"more speeds, or with longer drives at a steady speed, would tell)")
+            f"more speeds, or with longer drives at a steady speed, would tell){beside}")
 
 
 def caution(c: Candidate, con: Consistency | None) -> str | None:
@@ -568,9 +604,9 @@ def drift_caution(c: Candidate, con: Consistency | None) -> str | None:
     (:func:`drifts`); None otherwise."""
     if not drifts(con):
         return None
-    if math.isfinite(con.beside_p):
+    if con.beside is not None:
         return (f"{c.id} is not the same throughout a trial, refitted on the halves of each "
-                f"drive: {con.drift_text()}; {con.beside_text()}: there it still holds, so an "
+                f"drive: {con.drift_text()}; {con.beside.text(c.id)}: there it still holds, so an "
                 f"effect that changes during a trial is probably still missing and this one "
                 f"took up part of it")
     return (f"{c.id} is not the same throughout a trial, refitted on the halves of each "
@@ -599,12 +635,12 @@ HV_LOSS = Candidate("hv_loss", "actuator force lost with accumulated HV time (a 
 #: search's Wald test) ...
 BESIDE_P = 1e-6
 #: Evaluation limit of the measuring refit beside an unexplained drift, after the search
-#: (:func:`beside_loss`, once per run).  It starts from a model whose force law bent to take
-#: up the loss, and must get back from there: with retention of 0.2/s left out (3 x 34 s,
+#: (:func:`refit_beside`, once per run and device).  It starts from a model whose force law
+#: bent to take up the loss, and must get back from there: with retention of 0.2/s left out (3 x 34 s,
 #: plant seed 11, ad hoc) it had not converged after 30 evaluations (the free run on all
 #: trials 0.0428 rad/s) and converged after 89 (0.0345; the true model 0.0303).  The
-#: stand-in test during the search (:func:`drift_stand_in`) keeps :data:`MAX_NFEV`: it
-#: starts from the effect's own fit, and run to convergence it cost the platform case of
+#: stand-in tests during the search (:func:`measure_beside`) keep :data:`MAX_NFEV`: they
+#: start from the effect's own fit, and run to convergence one cost the platform case of
 #: bench_ident.py 30 s (84.5 against 54.8 s) for the same verdicts (ad hoc).
 BESIDE_NFEV = 150
 
@@ -615,14 +651,36 @@ def can_measure_beside(effects: tuple[Candidate, ...]) -> bool:
     return not any(c.id in ("charge_retention", HV_LOSS.id) for c in effects)
 
 
-def beside_loss(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
-                fit: FitResult, window: float = 1.0, threads: int = 2,
-                max_nfev: int = BESIDE_NFEV) -> tuple[Problem, FitResult]:
+def refit_beside(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
+                 fit: FitResult, device: Candidate, window: float = 1.0, threads: int = 2,
+                 max_nfev: int = BESIDE_NFEV) -> tuple[Problem, FitResult]:
     """(The problem, its fit): the model with ``effects`` (fitted on all ``trials`` as
-    ``fit``; ``window`` [s]) refitted with :data:`HV_LOSS` beside it, from ``fit``, for up
-    to ``max_nfev`` evaluations."""
-    problem = Problem(trials, base, effects + (HV_LOSS,), window, threads=threads)
+    ``fit``; ``window`` [s]) refitted with the measuring ``device`` beside it, from ``fit``
+    and the device's start value, for up to ``max_nfev`` evaluations."""
+    problem = Problem(trials, base, effects + (device,), window, threads=threads)
     return problem, problem.fit(start=fit.values, x0=fit.x0, max_nfev=max_nfev)
+
+
+def measure_beside(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
+                   fit: FitResult, effect: Candidate, device: Candidate, window: float = 1.0,
+                   threads: int = 2) -> Beside | None:
+    """``effect`` (in ``effects``, the model fitted on all ``trials`` as ``fit``) refitted
+    beside the measuring ``device``, and the model without ``effect`` but with the device
+    (each :data:`MAX_NFEV` evaluations; the second from the first): a :class:`Beside`, or
+    None when one of its figures is not finite."""
+    with_it, f1 = refit_beside(trials, base, effects, fit, device, window, threads, MAX_NFEV)
+    own = {p.name for p in effect.params}
+    without = Problem(trials, base, tuple(c for c in effects if c is not effect) + (device,),
+                      window, threads=threads)
+    f0 = without.fit(start={k: v for k, v in f1.values.items() if k not in own},
+                     x0=f1.x0, max_nfev=MAX_NFEV)
+    e1 = pooled_rmse(fitted_metrics(with_it, f1, trials))
+    e0 = pooled_rmse(fitted_metrics(without, f0, trials))
+    p = effect_wald_p(f1, effect)
+    value = f1.values[device.params[0].name]
+    if not all(math.isfinite(v) for v in (e1, e0, p, value)) or e0 <= 0.0:
+        return None
+    return Beside(device, value, {n: f1.values[n] for n in own}, p, (e1, e0))
 
 
 def drift_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
@@ -632,31 +690,79 @@ def drift_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candid
     windows of ``window`` [s]) stands in for a change within the trials, or None.
 
     Only an effect that drifts (:func:`drifts` of ``con``, its check trial by trial) is
-    tested, and only when :func:`can_measure_beside`.  The model is refitted with
-    :data:`HV_LOSS` beside it (:func:`beside_loss`), and without ``effect`` but with the
-    device (each :data:`MAX_NFEV` evaluations; the second from the first).  ``effect`` stands in when,
-    beside the device, its Wald p is not under :data:`BESIDE_P`, or it cuts the pooled
-    free-run error on all trials by less than half of ``min_gain`` (a fraction, e.g. 0.1)
-    against the device alone.  The figures are kept on ``con`` (``beside_*``); when one of
-    them is not finite the test is void (None, nothing kept)."""
+    tested, and only when :func:`can_measure_beside`.  It is refitted beside
+    :data:`HV_LOSS` (:func:`measure_beside`), and stands in when it no longer holds there
+    (:meth:`Beside.holds`: its Wald p not under :data:`BESIDE_P`, or it cuts the pooled
+    free-run error on all trials by less than half of ``min_gain``, a fraction, against the
+    device alone).  The refit is kept on ``con`` (``beside``); when it is void, None."""
     if not drifts(con) or not can_measure_beside(effects):
         return None
-    with_it, f1 = beside_loss(trials, base, effects, fit, window, threads, MAX_NFEV)
-    own = {p.name for p in effect.params}
-    without = Problem(trials, base, tuple(c for c in effects if c is not effect) + (HV_LOSS,),
-                      window, threads=threads)
-    f0 = without.fit(start={k: v for k, v in f1.values.items() if k not in own},
-                     x0=f1.x0, max_nfev=MAX_NFEV)
-    e1 = pooled_rmse(fitted_metrics(with_it, f1, trials))
-    e0 = pooled_rmse(fitted_metrics(without, f0, trials))
-    p = wald_p(f1, effect)
-    if not all(math.isfinite(v) for v in (e1, e0, p, f1.values["loss_rate"])) or e0 <= 0.0:
-        return None
-    con.beside_rate, con.beside_p, con.beside_sim = f1.values["loss_rate"], p, (e1, e0)
-    con.beside_values = {n: f1.values[n] for n in own}
-    if p < BESIDE_P and 1.0 - e1 / e0 >= 0.5 * min_gain:
+    con.beside = measure_beside(trials, base, effects, fit, effect, HV_LOSS, window, threads)
+    if con.beside is None or con.beside.holds(min_gain):
         return None
     return (f"{effect.id} changes within the trials ({con.drift_text()}); "
-            f"{con.beside_text(min_gain)}: there it no longer holds, so it stands in for an "
-            f"effect that changes during the trials")
+            f"{con.beside.text(effect.id, min_gain)}: there it no longer holds, so it stands "
+            f"in for an effect that changes during the trials")
 
+
+def _on_lag(x, pv, extra):
+    pv[L.P_RISE_TIME] = x[0]
+
+
+#: The measuring device for a size that grows with the speed (module docstring): every
+#: actuator's force x (1 - exp(-t_on / lag_tau)), t_on the time since it was switched on.
+#: A loss at each switch-on takes a larger share of a shorter push, so it grows with speed.
+ON_LAG = Candidate("on_lag", "actuator force that builds up after each switch-on (a "
+                   "measuring device)", (ParamSpec("lag_tau", "s", 0.02, 1e-5, 0.5, 0.01),),
+                   _on_lag, lambda x: {"time_constant_s": float(x[0])}, "on_time")
+
+#: Each device in words: (what it is, its fitted value [its unit] -> words).
+DEVICE_WORDS: dict[str, tuple[str, Callable[[float], str]]] = {
+    HV_LOSS.id: ("a force loss that grows with the accumulated HV time",
+                 lambda v: f"rate {v:.3g}/s"),
+    ON_LAG.id: ("a force that builds up after each switch-on",
+                lambda v: f"time constant {1e3 * v:.3g} ms"),
+}
+
+#: An effect whose size grows with the trials' speed (k > :data:`EXPONENT`) with a trend
+#: this unlikely by chance (two-sided) or less is refitted beside :data:`ON_LAG`
+#: (:func:`lag_stand_in`).  Ad hoc, 3 x 34 s, plant seeds 11-16: retention fitted to a
+#: 40 ms rise lag read k = +0.99 to +2.34 with p = 3e-5 to 0.045.
+SEEK_P = 0.1
+
+
+def grows_with_speed(c: Consistency | None) -> bool:
+    """True when the effect's size grows with the trials' speed, steeper than
+    speed^EXPONENT with a trend p under :data:`SEEK_P`: reason enough to test it beside
+    :data:`ON_LAG` (:func:`lag_stand_in`), not to refuse it."""
+    return c is not None and c.exponent > EXPONENT and c.trend_p < SEEK_P
+
+
+def can_measure_lag(effects: tuple[Candidate, ...]) -> bool:
+    """Whether :data:`ON_LAG` can go beside the model with ``effects``: not when it has a
+    rise lag of its own (the device would be it) or the device already."""
+    return not any(c.id in ("rise_lag", ON_LAG.id) for c in effects)
+
+
+def lag_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
+                 fit: FitResult, effect: Candidate, con: Consistency | None,
+                 min_gain: float, window: float = 1.0, threads: int = 2) -> str | None:
+    """Why ``effect`` (in ``effects``, the model fitted on all ``trials`` as ``fit``, with
+    windows of ``window`` [s]) stands in for a force that builds up after each switch-on,
+    or None.
+
+    Only an effect whose size grows with the speed (:func:`grows_with_speed` of ``con``)
+    is tested, and only when :func:`can_measure_lag`.  It is refitted beside
+    :data:`ON_LAG` (:func:`measure_beside`) and stands in when it no longer holds there
+    (:meth:`Beside.holds`).  The refit is kept on ``con`` (``beside_lag``); when it is
+    void, None."""
+    if not grows_with_speed(con) or not can_measure_lag(effects):
+        return None
+    con.beside_lag = measure_beside(trials, base, effects, fit, effect, ON_LAG, window,
+                                    threads)
+    if con.beside_lag is None or con.beside_lag.holds(min_gain):
+        return None
+    return (f"{effect.id} grows with the speed ({con.text(effect)}); "
+            f"{con.beside_lag.text(effect.id, min_gain)}: there it no longer holds, so it "
+            f"stands in for a loss at each switch-on, which takes a larger share of the "
+            f"shorter pushes at speed")

@@ -696,6 +696,19 @@ def wald_p(fit: FitResult, effect: Candidate) -> float:
     return float(stats.chi2.sf(chi2, len(idx)))
 
 
+def effect_wald_p(fit: FitResult, effect: Candidate) -> float:
+    """p-value of "``effect`` is absent" in ``fit`` (:func:`wald_p`; for charge retention
+    the one-sided test of its rate, :func:`_retention_p`)."""
+    return wald_p(fit, effect) if effect.id != "charge_retention" else _retention_p(fit)
+
+
+def _retention_p(fit: FitResult) -> float:
+    """Retention is absent when its rate is 0 (its recovery is then undetermined)."""
+    i = fit.names.index("rate")
+    sd = math.sqrt(max(fit.cov[i, i], 1e-300))
+    return float(stats.norm.sf(fit.theta[i] / sd))
+
+
 def _null_value(effect: Candidate, name: str) -> float:
     """The parameter value at which the effect vanishes."""
     if effect.id == "charge_retention":

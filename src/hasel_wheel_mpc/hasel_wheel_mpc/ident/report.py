@@ -19,7 +19,8 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             for the chosen ones (wald_p: "absent" in the final model);
                             consistency: {units, speed_exponent, speed_exponent_sd,
                             speed_trend_p, drift_exponent, drift_exponent_sd, drift_p,
-                            beside_hv_loss, caution} the effect refitted trial by trial
+                            beside_hv_loss, beside_on_lag, caution} the effect refitted
+                            trial by trial
                             (units "trial"), or span by span when the trials' speeds
                             differ by less than 1.2x ("span", each drive cut in up to
                             six), size ~ speed^k, and on the halves of each drive (size ~
@@ -32,8 +33,13 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             refitted beside a force loss growing with HV time (the
                             device's rate, the effect's own parameters there by name in
                             their units, its Wald p there, the free run on all trials
-                            with it and without it), null when not refitted; null when
-                            not checked
+                            with it and without it), null when not refitted;
+                            beside_on_lag {time_constant_s, values, wald_p,
+                            sim_rmse_rad_s, sim_rmse_without_rad_s}: the same for an
+                            effect whose size grows with the speed (k > 0.5, p < 0.1),
+                            refitted beside a force that builds up after each switch-on
+                            (1 - exp(-t_on / time_constant_s)), null when not refitted;
+                            null when not checked
 candidates                 [{round, id, score_statistic, score_dof, score_p,
                             predicted_window_rmse_rad, refitted, converged (null: not
                             refitted), window_rmse_rad,
@@ -47,7 +53,8 @@ tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_ra
                             other, refused, fitted the held-out windows as well
                             (select.tied_pair); [] when none
 unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p_value,
-                            text, phase_rad, torque_ci95_N_m, actuator_factors, drift}] structure
+                            text, phase_rad, torque_ci95_N_m, actuator_factors, drift,
+                            drift_devices}] structure
                             left in the final model's residual; [] when none.  A
                             signature periodic in an angle is sized by a refit of a
                             torque at its period (ident/periodic.py):
@@ -56,7 +63,14 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             Wald test of "no torque"; phase_rad and torque_ci95_N_m are
                             null where it is sized from the residual alone.  drift
                             true: a drift during the drive along axis "time", "hv_time"
-                            or "speed" (residual.drive_trend);
+                            or "speed" (residual.drive_trend); drift_devices {hv_loss,
+                            on_lag: {value, unit, wald_p, sim_rmse_rad_s,
+                            sim_rmse_model_rad_s}}: each measuring device (a force loss
+                            growing with HV time, rate [1/s]; a force building up after
+                            each switch-on, time constant [s]) refitted beside the final
+                            model, and the free run on all trials with it and without
+                            it, for a drift ({} otherwise, and without a device the model
+                            has an effect of its own form for);
                             amplitude_rad_s2 is half the fitted curve's largest range
                             within a trial.  Axis "actuator": one force factor per
                             actuator, sized by a refit (ident/actuator.py), listed in
@@ -104,13 +118,14 @@ from hasel_wheel_sim.model_file import save_model
 
 from . import plots
 from .candidates import BY_ID, Candidate
-from .consistency import Consistency, caution
+from .consistency import Beside, Consistency, caution
 from .data import find_coasts
 from ..paper import TABLE_III
 from .metrics import TrialMetrics, pooled_rmse
 from .prediction import PREDICTION_SPAN
 from .residual import Diagnostics
-from .select import Evaluation, Identification, effect_wald_p
+from .fit import effect_wald_p
+from .select import Evaluation, Identification
 
 SCHEMA = "hasel_wheel.identification/1"
 
@@ -271,7 +286,9 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
              "torque_ci95_N_m": None if s.torque_ci95 is None else
              [_num(v) for v in s.torque_ci95],
              "actuator_factors": None if s.factors is None else [_num(v) for v in s.factors],
-             "drift": s.drift}
+             "drift": s.drift,
+             "drift_devices": {k: {n: _num(v) if n != "unit" else v for n, v in d.items()}
+                               for k, d in s.devices.items()}}
             for s in after.signatures],
         "unconfirmed": [{"axis": s.axis, "period": _num(s.period),
                          "amplitude_rad_s2": _num(s.amplitude), "p_value": _num(s.p_value),
@@ -305,13 +322,18 @@ def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
             "drift_exponent": _num(con.drift) if drift else None,
             "drift_exponent_sd": _num(con.drift_sd),
             "drift_p": _num(con.drift_p) if drift else None,
-            "beside_hv_loss": ({"rate_per_s": _num(con.beside_rate),
-                                "values": {k: _num(v) for k, v in con.beside_values.items()},
-                                "wald_p": _num(con.beside_p),
-                                "sim_rmse_rad_s": _num(con.beside_sim[0]),
-                                "sim_rmse_without_rad_s": _num(con.beside_sim[1])}
-                               if math.isfinite(con.beside_p) else None),
+            "beside_hv_loss": _beside(con.beside, "rate_per_s"),
+            "beside_on_lag": _beside(con.beside_lag, "time_constant_s"),
             "caution": caution(c, con)}
+
+
+def _beside(b: Beside | None, value_key: str) -> dict | None:
+    """An effect refitted beside a measuring device, for the JSON; None when it was not."""
+    if b is None:
+        return None
+    return {value_key: _num(b.value), "values": {k: _num(v) for k, v in b.values.items()},
+            "wald_p": _num(b.p), "sim_rmse_rad_s": _num(b.sim[0]),
+            "sim_rmse_without_rad_s": _num(b.sim[1])}
 
 
 def _ci(ci: list) -> str:

@@ -57,7 +57,13 @@ Search (forward selection).  Starting from the nominal model:
      holds beside the device, so it is refused; a right drag that takes up part of a
      missing retention grows there too, but holds, and is kept with a caution
      (:func:`~.consistency.drift_stand_in`).  When the model has a retention already, or
-     the effect is retention, no such refit runs and a drift is only a caution.
+     the effect is retention, no such refit runs and a drift is only a caution.  An
+     effect whose size grows with the trials' speed (short of a refusal) is refitted
+     beside a force that builds up after each switch-on (the device
+     :data:`~.consistency.ON_LAG`): retention standing in for a rise lag no longer holds
+     there and is refused (:func:`~.consistency.lag_stand_in`).  After the search, an
+     unexplained drift is measured beside the final model by each device that can go
+     there (``Signature.devices``): a description, never a name.
      Checked on the fit on all trials of every refit, so a stand-in is refused before its
      folds, and is not "backed" (no second start, no pair).
 
@@ -127,17 +133,17 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import BY_ID, LIBRARY, Candidate
-from .consistency import (HV_LOSS, Consistency, beside_loss, can_measure_beside,
-                          drift_stand_in, stand_in_reason, trial_consistency)
+from .consistency import (DEVICE_WORDS, HV_LOSS, ON_LAG, Consistency, can_measure_beside,
+                          can_measure_lag, drift_stand_in, lag_stand_in, refit_beside,
+                          stand_in_reason, trial_consistency)
 from .data import Trial
-from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, force_coordinates,
-                  wald_p)
+from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, effect_wald_p,
+                  force_coordinates, wald_p)
 from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
@@ -618,6 +624,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     within: dict[tuple[bytes, str], str] = {}
     # (the fit's packed vector, effect id) -> the effect refitted trial by trial
     checked: dict[tuple[bytes, str], Consistency] = {}
+    # id -> the check of each effect refused beside a force that builds up after each
+    # switch-on
+    lagging: dict[str, Consistency] = {}
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
@@ -642,7 +651,12 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                     if why is not None:
                         within[(f.z.tobytes(), c.id)] = (f"{c.id} took up part of it and was "
                                                          f"refused, "
-                                                         f"{con.beside_text(min_gain)}")
+                                                         f"{con.beside.text(c.id, min_gain)}")
+                        break
+                    why = lag_stand_in(trials, base, effects, f, c, con, min_gain, window,
+                                       threads)
+                    if why is not None:
+                        lagging[c.id] = con
                         break
             refused[key] = why
         return refused[key]
@@ -834,44 +848,57 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 ident.prediction_before[tr.name] = prediction_residual(tr, nominal.fit.params)
                 ident.prediction_after[tr.name] = prediction_residual(tr, params, ext)
             ident.diagnostics_before, ident.diagnostics_after = before.result(), after.result()
-        _describe_unexplained(ident, chosen, current, stand_ins, within, say, threads)
+        _describe_unexplained(ident, chosen, current, stand_ins, within, lagging, min_gain,
+                              say, threads)
     return ident
 
 
 def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                           current: Evaluation, stand_ins: dict[str, tuple[Candidate, str]],
                           within: dict[tuple[bytes, str], str],
+                          lagging: dict[str, Consistency], min_gain: float,
                           say: Callable[[str], None], threads: int) -> None:
     """Size and describe what the final model (``chosen``, fitted as ``current``) leaves
     unexplained, in ``ident.diagnostics_after.signatures`` (changed in place; the periodic
     signatures a refit does not confirm go to ``ident.unconfirmed``).  ``stand_ins`` (id ->
     (candidate, why)) are the library effects refused as stand-ins for a trend with the
     trials' speed, ``within`` ((fit bytes, id) -> note) those refused beside a measured
-    change within the trials: both say what a signature is not.  ``say`` reports progress."""
+    change within the trials, ``lagging`` (id -> its check) those refused beside a force
+    that builds up after each switch-on (with the search's ``min_gain``): all say what a
+    signature is not.  ``say`` reports progress."""
     trials, base, window = ident.trials, ident.base, ident.window
     # what is left unexplained and periodic in an angle: sized by a refit (the residual
     # alone shows only what the fit did not already absorb), the strongest first
     diag = ident.diagnostics_after
     sigs = diag.signatures
-    # an unexplained drift is measured beside them: a force factor per actuator or a
-    # periodic torque would otherwise take up part of it (:data:`~.consistency.HV_LOSS`)
+    # an unexplained drift is measured beside the model by each measuring device that can
+    # go there: how much of it a loss with HV time, or a force that builds up after each
+    # switch-on, takes up (a description, not a name).  The periodic torques and the force
+    # factors below are sized beside the HV-time loss: they would otherwise take up part of
+    # the drift (:data:`~.consistency.HV_LOSS`)
     measuring: tuple[tuple[Candidate, ...], FitResult] = (chosen, current.fit)
-    if any(drift_signature(s) for s in sigs) and can_measure_beside(chosen):
-        say("refitting with a force loss growing with HV time beside the unexplained "
-            "drift (a measuring device)")
-        problem, device_fit = beside_loss(trials, base, chosen, current.fit, window,
-                                          threads)
-        measuring = (chosen + (HV_LOSS,), device_fit)
-        # how much of the drift a loss with HV time takes up: a description, not a name
-        rate = device_fit.values[HV_LOSS.params[0].name]
-        with_device = pooled_rmse(fitted_metrics(problem, device_fit, trials))
-        for sig in sigs:
-            if drift_signature(sig):
-                sig.text += (f"; with a force loss growing with the accumulated HV time "
-                             f"beside the model (a measuring device, never named), rate "
-                             f"{rate:.3g}/s (Wald p {wald_p(device_fit, HV_LOSS):.1e}), the "
-                             f"free run on all trials is {with_device:.4f} rad/s against "
-                             f"{pooled_rmse(current.sim_fitted):.4f}")
+    if any(drift_signature(s) for s in sigs):
+        e_model = pooled_rmse(current.sim_fitted)
+        devices = [d for d, can in ((HV_LOSS, can_measure_beside(chosen)),
+                                    (ON_LAG, can_measure_lag(chosen))) if can]
+        for device in devices:
+            noun, words = DEVICE_WORDS[device.id]
+            say(f"refitting with {noun} beside the unexplained drift (a measuring device)")
+            problem, device_fit = refit_beside(trials, base, chosen, current.fit, device,
+                                               window, threads)
+            if device is HV_LOSS:
+                measuring = (chosen + (HV_LOSS,), device_fit)
+            value = device_fit.values[device.params[0].name]
+            p = wald_p(device_fit, device)
+            e = pooled_rmse(fitted_metrics(problem, device_fit, trials))
+            for sig in sigs:
+                if drift_signature(sig):
+                    sig.devices[device.id] = {"value": value, "unit": device.params[0].unit,
+                                              "wald_p": p, "sim_rmse_rad_s": e,
+                                              "sim_rmse_model_rad_s": e_model}
+                    sig.text += (f"; with {noun} beside the model ({words(value)}, a "
+                                 f"measuring device, never named; Wald p {p:.1e}), the free "
+                                 f"run on all trials is {e:.4f} rad/s against {e_model:.4f}")
     todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
     beside = measuring
     torque_beside = False          # the strongest periodic torque is beside the factors
@@ -900,7 +927,7 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
         # sized beside the HV-time loss: say so
         for sig in sigs:
             if sig.torque_ci95 is not None or sig.factors is not None:
-                sig.text += ("; sized with a force loss growing with the accumulated HV "
+                sig.text += ("; sized with a force loss that grows with the accumulated HV "
                              "time beside it (rate "
                              f"{measuring[1].values[HV_LOSS.params[0].name]:.3g}/s), "
                              "a measuring device for the unexplained drift")
@@ -927,7 +954,8 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                 sig.text += f"; refitted to it, {why}"
         if drift_signature(sig):
             # what the drift is not: the library's effects that took it up in part, as
-            # refused in the refits the search kept (one note per effect)
+            # refused in the refits the search kept (one note per effect), and those refused
+            # beside a force that builds up after each switch-on
             noted = set()
             for ev in (e for r in ident.rounds for e in r if not e.accepted):
                 for cid in ev.effects:
@@ -935,6 +963,11 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                     if why is not None and cid not in ident.chosen and cid not in noted:
                         noted.add(cid)
                         sig.text += f"; {why}"
+            for cid, con in lagging.items():
+                if cid not in ident.chosen and cid not in noted:
+                    noted.add(cid)
+                    sig.text += (f"; {cid} took up part of it and was refused, "
+                                 f"{con.beside_lag.text(cid, min_gain)}")
 
 
 def drift_signature(sig: Signature) -> bool:
@@ -945,16 +978,3 @@ def drift_signature(sig: Signature) -> bool:
 
 #: Unexplained periodic signatures sized by a refit (:mod:`.periodic`), strongest first.
 MEASURED_SIGNATURES = 3
-
-
-def effect_wald_p(fit: FitResult, effect: Candidate) -> float:
-    """p-value of "``effect`` is absent" in ``fit`` (:func:`wald_p`; for charge retention
-    the one-sided test of its rate, :func:`_retention_p`)."""
-    return wald_p(fit, effect) if effect.id != "charge_retention" else _retention_p(fit)
-
-
-def _retention_p(fit: FitResult) -> float:
-    """Retention is absent when its rate is 0 (its recovery is then undetermined)."""
-    i = fit.names.index("rate")
-    sd = math.sqrt(max(fit.cov[i, i], 1e-300))
-    return float(stats.norm.sf(fit.theta[i] / sd))
