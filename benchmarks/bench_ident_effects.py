@@ -286,7 +286,14 @@ def run_outside_library() -> None:
                     for i, c in res.consistency.items()]
         others = [f"{s.axis} {s.period:.3g}" if s.period is not None else s.axis
                   for s in res.diagnostics_after.signatures if not SEL.drift_signature(s)]
-        # the look-alikes refused beside the HV-time loss (consistency.drift_stand_in)
+        # each measuring device beside the final model, for the drift left
+        devices = [f"{k} {d['value']:.3g} {d['unit']}, free run {d['sim_rmse_rad_s']:.4f} "
+                   f"rad/s (model {d['sim_rmse_model_rad_s']:.4f})"
+                   for s in res.diagnostics_after.signatures if SEL.drift_signature(s)
+                   for k, d in s.devices.items()]
+        if devices:
+            drift += " measured beside the model by " + "; ".join(devices)
+        # the look-alikes refused beside a device (consistency.drift_stand_in, lag_stand_in)
         beside = ["+".join(e.effects) + " " + e.reason[e.reason.index("refitted beside"):
                                                         e.reason.index(": there")]
                   for r in res.rounds for e in r if ": there it no longer holds" in e.reason]

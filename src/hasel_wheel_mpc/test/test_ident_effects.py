@@ -469,6 +469,7 @@ def test_retention_standing_in_for_a_rise_lag_outside_the_library_is_refused_bes
                         dict(force_coordinates(base), tau_f=base.tau_f, tau=tau))
     assert lag["sim_rmse_rad_s"] < 1.1 * truth
     assert lag["sim_rmse_rad_s"] < 0.8 * loss["sim_rmse_rad_s"] < loss["sim_rmse_model_rad_s"]
+    assert "of these, a force that builds up after each switch-on takes up the most" in drift.text
     data = to_json(res, [], [])
     assert data["effects"] == []
     entry = next(u for u in data["unexplained"] if u["drift"])
@@ -493,6 +494,12 @@ def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measu
     with_device, without = loss["sim_rmse_rad_s"], loss["sim_rmse_model_rad_s"]
     assert (f"with a force loss that grows with the accumulated HV time beside the model "
             f"(rate {loss['value']:.3g}/s") in drift.text
+    # on these short drives the drift reads along speed, as a rise lag's would; the two
+    # devices tell them apart: a force building up after each switch-on takes up far less
+    assert drift.axis == "speed"
+    assert with_device < 0.8 * drift.devices["on_lag"]["sim_rmse_rad_s"]
+    assert "of these, a force loss that grows with the accumulated HV time takes up the most" \
+        in drift.text
     base = WheelParams()
     truth = model_error(res.trials, base, (C.BY_ID["charge_retention"],),
                         dict(force_coordinates(base), tau_f=base.tau_f, rate=0.2,

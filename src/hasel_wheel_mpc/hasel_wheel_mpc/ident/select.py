@@ -899,6 +899,12 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                     sig.text += (f"; with {noun} beside the model ({words(value)}, a "
                                  f"measuring device, never named; Wald p {p:.1e}), the free "
                                  f"run on all trials is {e:.4f} rad/s against {e_model:.4f}")
+        for sig in sigs:
+            if len(sig.devices) > 1:
+                # which shape of loss the drift has: the device that takes up the most
+                best = min(sig.devices, key=lambda k: sig.devices[k]["sim_rmse_rad_s"])
+                sig.text += (f"; of these, {DEVICE_WORDS[best][0]} takes up the most of it "
+                             f"(a description, not a name)")
     todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
     beside = measuring
     torque_beside = False          # the strongest periodic torque is beside the factors
