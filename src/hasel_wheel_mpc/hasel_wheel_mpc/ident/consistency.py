@@ -114,8 +114,9 @@ Beside a force that builds up after each switch-on.  An effect whose size grows 
 trials' speed short of a refusal may stand in for a loss at each switch-on: a force that
 builds up over a time constant takes a fixed bite out of every push, so a larger share of
 the shorter pushes at speed.  On three short trials, where the speed and the HV time rise
-together, retention fitted to a 40 ms rise lag grew so (k = +0.99 to +1.59, p = 6e-4 to
-0.045 over plant seeds 11, 12, 14-16; ad hoc) and was named.  So an effect that grows with
+together, retention fitted to a 40 ms rise lag grew so (each model fitted on all trials:
+k = +0.99 to +1.59, p = 6e-4 to 0.045 over plant seeds 11, 12, 14-16; ad hoc) and was
+named.  So an effect that grows with
 the speed (:func:`grows_with_speed`: k > :data:`EXPONENT`, p < :data:`SEEK_P`) is refitted
 once more beside :data:`ON_LAG` (rise lag's form, one parameter, a measuring device: never
 chosen, never written to model.yaml) and refused when it no longer holds there
@@ -124,12 +125,13 @@ data of seeds 11-16 the device took 39-41 ms and retention's Wald p there was 0.
 the free run within 3.3 % of the device's alone; the right retention of 0.1/s (seeds 3,
 11-16) kept p <= 5e-7 and a cut of 14 % or more, the right drag of 1e-3 and gain spread
 of 0.08 p <= 1e-80 and 23 % or more.  Weak retention (0.05/s) is close enough in shape to
-a 15 ms lag for the device to take it up on these short drives (p up to 0.5 in six seeds),
-so where such a retention grows with the speed (seed 13, k = +2.03, p = 0.004) it is
-refused beside the device.
+a 15 ms lag for the device to take it up on these short drives (p from 1e-19 to 0.5 over
+seeds 3, 11-16), so where such a retention also grows with the speed (seed 13, k = +2.03,
+p = 0.004) it would be refused beside the device.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -142,7 +144,7 @@ from hasel_wheel_sim.params import WheelParams
 
 from hasel_wheel_sim import layout as L
 
-from .candidates import Candidate, ParamSpec
+from .candidates import BY_ID, Candidate, ParamSpec
 from .data import Trial, hv_time
 from .fit import FitResult, Problem, effect_wald_p
 from .metrics import fitted_metrics, pooled_rmse
@@ -176,44 +178,46 @@ MIN_SPAN_SAMPLES = 30
 DRIFT = 0.05
 #: A trend with the trials' speed this unlikely by chance (two-sided), steeper than
 #: speed^(+-EXPONENT) but short of TREND_P, is reported as a caution (:func:`leans`), not
-#: refused.  On 3 x 34 s (plant seeds 11-14, ad hoc) retention named in place of a 40 ms rise
-#: lag outside the library read p = 0.0025, 0.045, refused, 0.005 (k = +1.0 to +1.5), and the
-#: right models of seven effects p >= 0.015 (42 runs, module docstring).
+#: refused.  On 3 x 34 s (plant seeds 11-14, ad hoc) retention fitted in place of a 40 ms
+#: rise lag outside the library read p = 0.0025, 0.045, refused, 0.005 (k = +1.0 to +1.5)
+#: and was named, until the refit beside :data:`ON_LAG` (:func:`lag_stand_in`); the right
+#: models of seven effects read p >= 0.015 (42 runs, module docstring).
 LEAN_P = 1e-2
 
 
 @dataclass
 class Beside:
-    """An effect refitted beside a measuring device (:func:`refit_beside`): ``value`` the
+    """An effect refitted beside a measuring device (:func:`measure_beside`): ``value`` the
     device's one parameter in its unit, ``values`` the effect's own values there (each in its
-    unit), ``p`` the effect's Wald p there (:func:`~.fit.effect_wald_p`), and ``sim`` the
+    unit), ``p`` the effect's Wald p there (:func:`~.fit.effect_wald_p`), ``sim`` the
     pooled free-run error on all trials [rad/s] with the effect and without it (the device
-    alone)."""
+    alone), and ``min_gain`` (a fraction) the search's, by which :meth:`holds` judges."""
 
     device: Candidate
     value: float
     values: dict[str, float]
     p: float
     sim: tuple[float, float]
+    min_gain: float = 0.10
 
-    def holds(self, min_gain: float) -> bool:
+    def holds(self) -> bool:
         """Whether the effect still holds beside the device: its Wald p under
-        :data:`BESIDE_P`, and it cuts the free run on all trials by half of ``min_gain`` (a
-        fraction) or more against the device alone."""
+        :data:`BESIDE_P`, and it cuts the free run on all trials by half of ``min_gain`` or
+        more against the device alone."""
         e1, e0 = self.sim
-        return self.p < BESIDE_P and 1.0 - e1 / e0 >= 0.5 * min_gain
+        return self.p < BESIDE_P and 1.0 - e1 / e0 >= 0.5 * self.min_gain
 
-    def text(self, effect: str, min_gain: float | None = None) -> str:
-        """The refit in words; with ``min_gain``, what :meth:`holds` needs."""
+    def text(self, effect: str, need: bool = False) -> str:
+        """The refit in words; with ``need``, what :meth:`holds` needs."""
         e1, e0 = self.sim
-        need = ((f" (need < {BESIDE_P:.0e})", f", need {50 * min_gain:.0f} %")
-                if min_gain is not None else ("", ""))
+        needs = ((f" (need < {BESIDE_P:.0e})", f", need {50 * self.min_gain:.0f} %")
+                 if need else ("", ""))
         cut = 1.0 - e1 / e0
         noun, value = DEVICE_WORDS[self.device.id]
         return (f"refitted beside {noun} ({value(self.value)}, a measuring "
-                f"device; Wald p of {effect} {self.p:.1e}{need[0]}, the free run on all "
+                f"device; Wald p of {effect} {self.p:.1e}{needs[0]}, the free run on all "
                 f"trials {e1:.4f} rad/s against {e0:.4f} without it, "
-                f"{'a cut' if cut >= 0 else 'a rise'} of {100 * abs(cut):.1f} %{need[1]})")
+                f"{'a cut' if cut >= 0 else 'a rise'} of {100 * abs(cut):.1f} %{needs[1]})")
 
 
 @dataclass
@@ -581,12 +585,13 @@ def leans(c: Consistency | None) -> bool:
 
 def lean_caution(c: Candidate, con: Consistency | None) -> str | None:
     """A caution when ``c``, refitted trial by trial as ``con``, :func:`leans` on the speed;
-    None otherwise."""
+    None otherwise.  It quotes the refit beside :data:`ON_LAG` when one ran."""
     if not leans(con):
         return None
     by = "trial by trial" if con.unit == "trial" else "span by span"
-    beside = ("" if con.beside_lag is None else
-              f"; {con.beside_lag.text(c.id)}: there it still holds")
+    b = con.beside_lag
+    beside = ("" if b is None else f"; {b.text(c.id)}: there it "
+              + ("still holds" if b.holds() else "no longer holds"))
     return (f"{c.id} goes with the speed, refitted {by}: {con.text(c)}; short of a refusal "
             f"(p < {TREND_P:.0e}), but a physical {c.id} would be one value at every speed, "
             f"so it may stand in for an effect whose size goes with the speed (trials at "
@@ -604,11 +609,11 @@ def drift_caution(c: Candidate, con: Consistency | None) -> str | None:
     (:func:`drifts`); None otherwise."""
     if not drifts(con):
         return None
-    if con.beside is not None:
+    if con.beside is not None and con.beside.holds():
         return (f"{c.id} is not the same throughout a trial, refitted on the halves of each "
-                f"drive: {con.drift_text()}; {con.beside.text(c.id)}: there it still holds, so an "
-                f"effect that changes during a trial is probably still missing and this one "
-                f"took up part of it")
+                f"drive: {con.drift_text()}; {con.beside.text(c.id)}: there it still holds, "
+                f"so an effect that changes during a trial is probably still missing and "
+                f"this one took up part of it")
     return (f"{c.id} is not the same throughout a trial, refitted on the halves of each "
             f"drive: {con.drift_text()}; either it stands in for an effect that changes "
             f"during a trial, or such an effect is still missing and this one took up part "
@@ -636,9 +641,9 @@ HV_LOSS = Candidate("hv_loss", "actuator force lost with accumulated HV time (a 
 BESIDE_P = 1e-6
 #: Evaluation limit of the measuring refit beside an unexplained drift, after the search
 #: (:func:`refit_beside`, once per run and device).  It starts from a model whose force law
-#: bent to take up the loss, and must get back from there: with retention of 0.2/s left out (3 x 34 s,
-#: plant seed 11, ad hoc) it had not converged after 30 evaluations (the free run on all
-#: trials 0.0428 rad/s) and converged after 89 (0.0345; the true model 0.0303).  The
+#: bent to take up the loss, and must get back from there: with retention of 0.2/s left out
+#: (3 x 34 s, plant seed 11, ad hoc) it had not converged after 30 evaluations (the free run
+#: on all trials 0.0428 rad/s) and converged after 89 (0.0345; the true model 0.0303).  The
 #: stand-in tests during the search (:func:`measure_beside`) keep :data:`MAX_NFEV`: they
 #: start from the effect's own fit, and run to convergence one cost the platform case of
 #: bench_ident.py 30 s (84.5 against 54.8 s) for the same verdicts (ad hoc).
@@ -662,12 +667,12 @@ def refit_beside(trials: list[Trial], base: WheelParams, effects: tuple[Candidat
 
 
 def measure_beside(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
-                   fit: FitResult, effect: Candidate, device: Candidate, window: float = 1.0,
-                   threads: int = 2) -> Beside | None:
+                   fit: FitResult, effect: Candidate, device: Candidate, min_gain: float,
+                   window: float = 1.0, threads: int = 2) -> Beside | None:
     """``effect`` (in ``effects``, the model fitted on all ``trials`` as ``fit``) refitted
     beside the measuring ``device``, and the model without ``effect`` but with the device
-    (each :data:`MAX_NFEV` evaluations; the second from the first): a :class:`Beside`, or
-    None when one of its figures is not finite."""
+    (each :data:`MAX_NFEV` evaluations; the second from the first): a :class:`Beside` judged
+    by ``min_gain`` (a fraction), or None when one of its figures is not finite."""
     with_it, f1 = refit_beside(trials, base, effects, fit, device, window, threads, MAX_NFEV)
     own = {p.name for p in effect.params}
     without = Problem(trials, base, tuple(c for c in effects if c is not effect) + (device,),
@@ -680,7 +685,7 @@ def measure_beside(trials: list[Trial], base: WheelParams, effects: tuple[Candid
     value = f1.values[device.params[0].name]
     if not all(math.isfinite(v) for v in (e1, e0, p, value)) or e0 <= 0.0:
         return None
-    return Beside(device, value, {n: f1.values[n] for n in own}, p, (e1, e0))
+    return Beside(device, value, {n: f1.values[n] for n in own}, p, (e1, e0), min_gain)
 
 
 def drift_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
@@ -697,24 +702,24 @@ def drift_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candid
     device alone).  The refit is kept on ``con`` (``beside``); when it is void, None."""
     if not drifts(con) or not can_measure_beside(effects):
         return None
-    con.beside = measure_beside(trials, base, effects, fit, effect, HV_LOSS, window, threads)
-    if con.beside is None or con.beside.holds(min_gain):
+    con.beside = measure_beside(trials, base, effects, fit, effect, HV_LOSS, min_gain, window,
+                                threads)
+    if con.beside is None or con.beside.holds():
         return None
     return (f"{effect.id} changes within the trials ({con.drift_text()}); "
-            f"{con.beside.text(effect.id, min_gain)}: there it no longer holds, so it stands "
+            f"{con.beside.text(effect.id, need=True)}: there it no longer holds, so it stands "
             f"in for an effect that changes during the trials")
 
 
-def _on_lag(x, pv, extra):
-    pv[L.P_RISE_TIME] = x[0]
-
-
-#: The measuring device for a size that grows with the speed (module docstring): every
-#: actuator's force x (1 - exp(-t_on / lag_tau)), t_on the time since it was switched on.
+#: The measuring device for a size that grows with the speed (module docstring): the rise
+#: lag's physics, every actuator's force x (1 - exp(-t_on / lag_tau)), t_on the time since
+#: it was switched on, from 20 ms, without the rise lag's screening or saved model fields.
 #: A loss at each switch-on takes a larger share of a shorter push, so it grows with speed.
-ON_LAG = Candidate("on_lag", "actuator force that builds up after each switch-on (a "
-                   "measuring device)", (ParamSpec("lag_tau", "s", 0.02, 1e-5, 0.5, 0.01),),
-                   _on_lag, lambda x: {"time_constant_s": float(x[0])}, "on_time")
+ON_LAG = dataclasses.replace(
+    BY_ID["rise_lag"], id="on_lag",
+    title="actuator force that builds up after each switch-on (a measuring device)",
+    params=(ParamSpec("lag_tau", "s", 0.02, 1e-5, 0.5, 0.01),), extension=None,
+    screen_at=(), scan=())
 
 #: Each device in words: (what it is, its fitted value [its unit] -> words).
 DEVICE_WORDS: dict[str, tuple[str, Callable[[float], str]]] = {
@@ -724,10 +729,32 @@ DEVICE_WORDS: dict[str, tuple[str, Callable[[float], str]]] = {
                 lambda v: f"time constant {1e3 * v:.3g} ms"),
 }
 
+def devices_verdict(devices: dict[str, dict], min_gain: float) -> str:
+    """Which measuring device takes up the most of a drift, in words (a description, not a
+    name).  ``devices`` maps each device's id to its refit beside the model:
+    ``sim_rmse_rad_s`` the free run on all trials with it, ``sim_rmse_model_rad_s`` without
+    it.  A device takes up the drift when it cuts that error by half of ``min_gain`` (a
+    fraction) or more; one takes up the most when, besides, its error is that much below
+    every other device's."""
+    cut = {k: 1.0 - d["sim_rmse_rad_s"] / d["sim_rmse_model_rad_s"] for k, d in devices.items()}
+    best = min(devices, key=lambda k: devices[k]["sim_rmse_rad_s"])
+    need = 0.5 * min_gain
+    e = devices[best]["sim_rmse_rad_s"]
+    if cut[best] < need:
+        return (f"no device takes up much of it (each cuts the free run on all trials by less "
+                f"than {100 * need:.0f} %)")
+    if all(e <= (1.0 - need) * d["sim_rmse_rad_s"] for k, d in devices.items() if k != best):
+        return (f"of these, {DEVICE_WORDS[best][0]} takes up the most of it (a description, "
+                f"not a name)")
+    return (f"the devices take up about as much of it (free runs within {100 * need:.0f} % of "
+            f"each other): its shape is not told")
+
+
 #: An effect whose size grows with the trials' speed (k > :data:`EXPONENT`) with a trend
 #: this unlikely by chance (two-sided) or less is refitted beside :data:`ON_LAG`
-#: (:func:`lag_stand_in`).  Ad hoc, 3 x 34 s, plant seeds 11-16: retention fitted to a
-#: 40 ms rise lag read k = +0.99 to +2.34 with p = 3e-5 to 0.045.
+#: (:func:`lag_stand_in`).  Ad hoc, 3 x 34 s, plant seeds 11-16, each model fitted on all
+#: trials: retention fitted to a 40 ms rise lag read k = +0.99 to +2.34 with p = 3e-5 to
+#: 0.045.
 SEEK_P = 0.1
 
 
@@ -758,11 +785,11 @@ def lag_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candidat
     void, None."""
     if not grows_with_speed(con) or not can_measure_lag(effects):
         return None
-    con.beside_lag = measure_beside(trials, base, effects, fit, effect, ON_LAG, window,
-                                    threads)
-    if con.beside_lag is None or con.beside_lag.holds(min_gain):
+    con.beside_lag = measure_beside(trials, base, effects, fit, effect, ON_LAG, min_gain,
+                                    window, threads)
+    if con.beside_lag is None or con.beside_lag.holds():
         return None
     return (f"{effect.id} grows with the speed ({con.text(effect)}); "
-            f"{con.beside_lag.text(effect.id, min_gain)}: there it no longer holds, so it "
+            f"{con.beside_lag.text(effect.id, need=True)}: there it no longer holds, so it "
             f"stands in for a loss at each switch-on, which takes a larger share of the "
             f"shorter pushes at speed")

@@ -322,16 +322,18 @@ def _consistency(c: Candidate, con: Consistency | None) -> dict | None:
             "drift_exponent": _num(con.drift) if drift else None,
             "drift_exponent_sd": _num(con.drift_sd),
             "drift_p": _num(con.drift_p) if drift else None,
-            "beside_hv_loss": _beside(con.beside, "rate_per_s"),
-            "beside_on_lag": _beside(con.beside_lag, "time_constant_s"),
+            "beside_hv_loss": _beside(con.beside),
+            "beside_on_lag": _beside(con.beside_lag),
             "caution": caution(c, con)}
 
 
-def _beside(b: Beside | None, value_key: str) -> dict | None:
-    """An effect refitted beside a measuring device, for the JSON; None when it was not."""
+def _beside(b: Beside | None) -> dict | None:
+    """An effect refitted beside a measuring device, for the JSON (the device's value under
+    the key its ``describe`` gives it); None when it was not."""
     if b is None:
         return None
-    return {value_key: _num(b.value), "values": {k: _num(v) for k, v in b.values.items()},
+    (key, value), = b.device.describe([b.value]).items()
+    return {key: _num(value), "values": {k: _num(v) for k, v in b.values.items()},
             "wald_p": _num(b.p), "sim_rmse_rad_s": _num(b.sim[0]),
             "sim_rmse_without_rad_s": _num(b.sim[1])}
 

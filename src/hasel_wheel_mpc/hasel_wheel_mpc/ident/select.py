@@ -139,8 +139,8 @@ from hasel_wheel_sim.params import WheelParams
 
 from .candidates import BY_ID, LIBRARY, Candidate
 from .consistency import (DEVICE_WORDS, HV_LOSS, ON_LAG, Consistency, can_measure_beside,
-                          can_measure_lag, drift_stand_in, lag_stand_in, refit_beside,
-                          stand_in_reason, trial_consistency)
+                          can_measure_lag, devices_verdict, drift_stand_in, lag_stand_in,
+                          refit_beside, stand_in_reason, trial_consistency)
 from .data import Trial
 from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, effect_wald_p,
                   force_coordinates, wald_p)
@@ -619,14 +619,11 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     restarted = False
     refused: dict[bytes, str | None] = {}
     stand_ins: dict[str, tuple[Candidate, str]] = {}    # id -> (candidate, why a stand-in)
-    # (the fit's packed vector, effect id) -> why refused as a stand-in for a change within
-    # the trials
+    # (the fit's packed vector, effect id) -> why refused beside a measuring device (a
+    # stand-in for a change within the trials, or for a loss at each switch-on)
     within: dict[tuple[bytes, str], str] = {}
     # (the fit's packed vector, effect id) -> the effect refitted trial by trial
     checked: dict[tuple[bytes, str], Consistency] = {}
-    # id -> the check of each effect refused beside a force that builds up after each
-    # switch-on
-    lagging: dict[str, Consistency] = {}
 
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
@@ -646,17 +643,17 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                     if why is not None:
                         stand_ins[c.id] = (c, why)
                         break
-                    why = drift_stand_in(trials, base, effects, f, c, con, min_gain, window,
-                                         threads)
+                    # refused beside a measuring device: a change within the trials, then
+                    # a size that grows with the speed
+                    for check, kept in ((drift_stand_in, "beside"), (lag_stand_in, "beside_lag")):
+                        why = check(trials, base, effects, f, c, con, min_gain, window, threads)
+                        if why is not None:
+                            b = getattr(con, kept)
+                            within[(f.z.tobytes(), c.id)] = (f"{c.id} took up part of it and "
+                                                             f"was refused, "
+                                                             f"{b.text(c.id, need=True)}")
+                            break
                     if why is not None:
-                        within[(f.z.tobytes(), c.id)] = (f"{c.id} took up part of it and was "
-                                                         f"refused, "
-                                                         f"{con.beside.text(c.id, min_gain)}")
-                        break
-                    why = lag_stand_in(trials, base, effects, f, c, con, min_gain, window,
-                                       threads)
-                    if why is not None:
-                        lagging[c.id] = con
                         break
             refused[key] = why
         return refused[key]
@@ -848,24 +845,22 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 ident.prediction_before[tr.name] = prediction_residual(tr, nominal.fit.params)
                 ident.prediction_after[tr.name] = prediction_residual(tr, params, ext)
             ident.diagnostics_before, ident.diagnostics_after = before.result(), after.result()
-        _describe_unexplained(ident, chosen, current, stand_ins, within, lagging, min_gain,
-                              say, threads)
+        _describe_unexplained(ident, chosen, current, stand_ins, within, min_gain, say,
+                              threads)
     return ident
 
 
 def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                           current: Evaluation, stand_ins: dict[str, tuple[Candidate, str]],
-                          within: dict[tuple[bytes, str], str],
-                          lagging: dict[str, Consistency], min_gain: float,
+                          within: dict[tuple[bytes, str], str], min_gain: float,
                           say: Callable[[str], None], threads: int) -> None:
     """Size and describe what the final model (``chosen``, fitted as ``current``) leaves
     unexplained, in ``ident.diagnostics_after.signatures`` (changed in place; the periodic
     signatures a refit does not confirm go to ``ident.unconfirmed``).  ``stand_ins`` (id ->
     (candidate, why)) are the library effects refused as stand-ins for a trend with the
-    trials' speed, ``within`` ((fit bytes, id) -> note) those refused beside a measured
-    change within the trials, ``lagging`` (id -> its check) those refused beside a force
-    that builds up after each switch-on (with the search's ``min_gain``): all say what a
-    signature is not.  ``say`` reports progress."""
+    trials' speed, ``within`` ((fit bytes, id) -> note) those refused beside a measuring
+    device: both say what a signature is not.  ``min_gain`` (a fraction) is the search's;
+    ``say`` reports progress."""
     trials, base, window = ident.trials, ident.base, ident.window
     # what is left unexplained and periodic in an angle: sized by a refit (the residual
     # alone shows only what the fit did not already absorb), the strongest first
@@ -901,10 +896,7 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                                  f"run on all trials is {e:.4f} rad/s against {e_model:.4f}")
         for sig in sigs:
             if len(sig.devices) > 1:
-                # which shape of loss the drift has: the device that takes up the most
-                best = min(sig.devices, key=lambda k: sig.devices[k]["sim_rmse_rad_s"])
-                sig.text += (f"; of these, {DEVICE_WORDS[best][0]} takes up the most of it "
-                             f"(a description, not a name)")
+                sig.text += "; " + devices_verdict(sig.devices, min_gain)
     todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
     beside = measuring
     torque_beside = False          # the strongest periodic torque is beside the factors
@@ -960,8 +952,8 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                 sig.text += f"; refitted to it, {why}"
         if drift_signature(sig):
             # what the drift is not: the library's effects that took it up in part, as
-            # refused in the refits the search kept (one note per effect), and those refused
-            # beside a force that builds up after each switch-on
+            # refused beside a measuring device in the refits the search kept (one note per
+            # effect)
             noted = set()
             for ev in (e for r in ident.rounds for e in r if not e.accepted):
                 for cid in ev.effects:
@@ -969,11 +961,6 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                     if why is not None and cid not in ident.chosen and cid not in noted:
                         noted.add(cid)
                         sig.text += f"; {why}"
-            for cid, con in lagging.items():
-                if cid not in ident.chosen and cid not in noted:
-                    noted.add(cid)
-                    sig.text += (f"; {cid} took up part of it and was refused, "
-                                 f"{con.beside_lag.text(cid, min_gain)}")
 
 
 def drift_signature(sig: Signature) -> bool:
