@@ -214,10 +214,21 @@ def _devices(model: float, **errors: float) -> dict[str, dict]:
     (_devices(0.0331, hv_loss=0.0333, on_lag=0.0329), "no device takes up much of it (each "
      "cuts the free run on all trials by less than 5 %)"),
     # both cut it by 40 %, within 3 % of each other: 5 % apart is needed
-    (_devices(0.0500, hv_loss=0.0300, on_lag=0.0309), "the devices take up about as much")])
+    (_devices(0.0500, hv_loss=0.0300, on_lag=0.0309), "no device takes up clearly more"),
+    # a device that failed to refit (nan) is left out, whatever the other
+    (_devices(0.0500, hv_loss=math.nan, on_lag=0.0400), "of these, a force that builds up")])
 def test_the_device_that_takes_up_the_most_of_a_drift_must_cut_it_and_beat_the_other(
         devices, verdict):
     assert K.devices_verdict(devices, min_gain=0.1).startswith(verdict)
+
+
+def test_what_a_device_must_cut_is_half_of_min_gain():
+    # the lag cuts the free run by 8 % and beats the HV-time loss by 8 %: enough for half
+    # of 0.1, not for half of 0.2
+    devices = _devices(0.0500, hv_loss=0.0500, on_lag=0.0460)
+    assert K.devices_verdict(devices, min_gain=0.1).startswith("of these, a force that builds")
+    assert K.devices_verdict(devices, min_gain=0.2) == (
+        "no device takes up much of it (each cuts the free run on all trials by less than 10 %)")
 
 
 @pytest.mark.parametrize("k, p, grows", [(0.9, 0.05, True), (-0.9, 0.001, False),

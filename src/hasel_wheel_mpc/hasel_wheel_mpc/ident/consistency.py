@@ -115,8 +115,8 @@ trials' speed short of a refusal may stand in for a loss at each switch-on: a fo
 builds up over a time constant takes a fixed bite out of every push, so a larger share of
 the shorter pushes at speed.  On three short trials, where the speed and the HV time rise
 together, retention fitted to a 40 ms rise lag grew so (each model fitted on all trials:
-k = +0.99 to +1.59, p = 6e-4 to 0.045 over plant seeds 11, 12, 14-16; ad hoc) and was
-named.  So an effect that grows with
+k = +0.99 to +1.59, p = 6e-4 to 0.045 over plant seeds 11, 12, 14-16; ad hoc), and the
+search named it with seeds 11, 12, 14 and 15.  So an effect that grows with
 the speed (:func:`grows_with_speed`: k > :data:`EXPONENT`, p < :data:`SEEK_P`) is refitted
 once more beside :data:`ON_LAG` (rise lag's form, one parameter, a measuring device: never
 chosen, never written to model.yaml) and refused when it no longer holds there
@@ -735,7 +735,12 @@ def devices_verdict(devices: dict[str, dict], min_gain: float) -> str:
     ``sim_rmse_rad_s`` the free run on all trials with it, ``sim_rmse_model_rad_s`` without
     it.  A device takes up the drift when it cuts that error by half of ``min_gain`` (a
     fraction) or more; one takes up the most when, besides, its error is that much below
-    every other device's."""
+    every other device's.  Devices whose figures are not finite are left out."""
+    devices = {k: d for k, d in devices.items()
+               if math.isfinite(d["sim_rmse_rad_s"]) and math.isfinite(d["sim_rmse_model_rad_s"])
+               and d["sim_rmse_model_rad_s"] > 0.0}
+    if not devices:
+        return "no device could be refitted beside the model"
     cut = {k: 1.0 - d["sim_rmse_rad_s"] / d["sim_rmse_model_rad_s"] for k, d in devices.items()}
     best = min(devices, key=lambda k: devices[k]["sim_rmse_rad_s"])
     need = 0.5 * min_gain
@@ -746,8 +751,8 @@ def devices_verdict(devices: dict[str, dict], min_gain: float) -> str:
     if all(e <= (1.0 - need) * d["sim_rmse_rad_s"] for k, d in devices.items() if k != best):
         return (f"of these, {DEVICE_WORDS[best][0]} takes up the most of it (a description, "
                 f"not a name)")
-    return (f"the devices take up about as much of it (free runs within {100 * need:.0f} % of "
-            f"each other): its shape is not told")
+    return (f"no device takes up clearly more of it than the others (free runs within "
+            f"{100 * need:.0f} % of each other): its shape is not told")
 
 
 #: An effect whose size grows with the trials' speed (k > :data:`EXPONENT`) with a trend

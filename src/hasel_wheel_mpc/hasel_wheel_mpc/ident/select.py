@@ -886,6 +886,8 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
             value = device_fit.values[device.params[0].name]
             p = wald_p(device_fit, device)
             e = pooled_rmse(fitted_metrics(problem, device_fit, trials))
+            if not (math.isfinite(value) and math.isfinite(e)):
+                continue                # a refit that failed measures nothing
             for sig in sigs:
                 if drift_signature(sig):
                     sig.devices[device.id] = {"value": value, "unit": device.params[0].unit,
