@@ -293,6 +293,10 @@ def run_outside_library() -> None:
                    for k, d in s.devices.items()]
         if devices:
             drift += " measured beside the model by " + "; ".join(devices)
+        moved = [s.axis for s in res.diagnostics_after.signatures
+                 if SEL.drift_signature(s) and tr is not None and s.axis != tr.axis]
+        if moved:
+            drift += f"; reported along {moved[0]} (the device that takes up the most)"
         # the look-alikes refused beside a device (consistency.drift_stand_in, lag_stand_in)
         beside = ["+".join(e.effects) + " " + e.reason[e.reason.index("refitted beside"):
                                                         e.reason.index(": there")]

@@ -219,7 +219,12 @@ def _devices(model: float, **errors: float) -> dict[str, dict]:
     (_devices(0.0500, hv_loss=math.nan, on_lag=0.0400), "of these, a force that builds up")])
 def test_the_device_that_takes_up_the_most_of_a_drift_must_cut_it_and_beat_the_other(
         devices, verdict):
-    assert K.devices_verdict(devices, min_gain=0.1).startswith(verdict)
+    said = K.devices_verdict(devices, min_gain=0.1)
+    assert said.startswith(verdict)
+    lead = K.lead_device(devices, min_gain=0.1)
+    assert (lead is not None) is said.startswith("of these")
+    if lead is not None:
+        assert said.startswith(f"of these, {K.DEVICE_WORDS[lead][0]} takes up the most")
 
 
 def test_what_a_device_must_cut_is_half_of_min_gain():

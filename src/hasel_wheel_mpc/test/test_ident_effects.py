@@ -500,12 +500,16 @@ def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measu
     with_device, without = loss["sim_rmse_rad_s"], loss["sim_rmse_model_rad_s"]
     assert (f"with a force loss that grows with the accumulated HV time beside the model "
             f"(rate {loss['value']:.3g}/s") in drift.text
-    # on these short drives the drift reads along speed, as a rise lag's would; the two
-    # devices tell them apart: a force building up after each switch-on takes up far less
-    assert drift.axis == "speed"
+    # on these short drives the regression reads the drift along speed, as a rise lag's
+    # would; the two devices tell them apart (a force building up after each switch-on takes
+    # up far less), so the drift is reported along the HV time
     assert with_device < 0.8 * drift.devices["on_lag"]["sim_rmse_rad_s"]
     assert "of these, a force loss that grows with the accumulated HV time takes up the most" \
         in drift.text
+    trend = res.diagnostics_after.trend
+    assert trend.axis == "speed" and drift.axis == "hv_time" and drift.unit == "s"
+    assert drift.p_value == trend.p_values["hv_time"] < 1e-4
+    assert "not speed, which the regression alone read" in drift.text
     base = WheelParams()
     truth = model_error(res.trials, base, (C.BY_ID["charge_retention"],),
                         dict(force_coordinates(base), tau_f=base.tau_f, rate=0.2,

@@ -131,6 +131,18 @@ def test_a_drift_with_hv_time_is_found_with_its_slope_and_white_defects_give_non
                          trial_of) is None
 
 
+def test_a_drift_reported_along_another_axis_takes_that_axis_unit_and_p_value():
+    tr = R.Trend("speed", "rad/s", -0.004, 0.015, 8e-19,
+                 {"speed": 8e-19, "time": 1e-11, "hv_time": 3e-9}, {"time": 0.9, "hv_time": 0.9})
+    sig = R.trend_signature(tr, 0.0357)
+    assert (sig.axis, sig.unit, sig.p_value) == ("speed", "rad/s", 8e-19)
+    R.drift_along(sig, tr, "hv_time", "a reason")
+    assert (sig.axis, sig.unit, sig.p_value) == ("hv_time", "s", 3e-9) and sig.drift
+    assert sig.text.endswith("; reported along accumulated HV on-time of the driven actuator "
+                             "(p = 3.0e-09), not speed, which the regression alone read: a "
+                             "reason")
+
+
 def test_a_slow_drift_is_not_taken_for_a_period_but_a_real_one_is_found(windows):
     prob, wins, trial_of, axes = windows
     rng = np.random.default_rng(2)

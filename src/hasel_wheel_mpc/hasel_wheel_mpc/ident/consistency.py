@@ -729,6 +729,34 @@ DEVICE_WORDS: dict[str, tuple[str, Callable[[float], str]]] = {
                 lambda v: f"time constant {1e3 * v:.3g} ms"),
 }
 
+#: The trend axis (:data:`~.residual.TREND_AXES`) along which each device's loss drifts:
+#: a loss with HV time along the HV time, a loss at each switch-on along the speed.
+DEVICE_TREND_AXIS = {HV_LOSS.id: "hv_time", ON_LAG.id: "speed"}
+
+
+def lead_device(devices: dict[str, dict], min_gain: float) -> str | None:
+    """The id of the device that takes up the most of a drift (:func:`devices_verdict`),
+    or None when none does."""
+    devices = _finite(devices)
+    if not devices:
+        return None
+    best = min(devices, key=lambda k: devices[k]["sim_rmse_rad_s"])
+    need = 0.5 * min_gain
+    d = devices[best]
+    e = d["sim_rmse_rad_s"]
+    if 1.0 - e / d["sim_rmse_model_rad_s"] < need or not all(
+            e <= (1.0 - need) * o["sim_rmse_rad_s"] for k, o in devices.items() if k != best):
+        return None
+    return best
+
+
+def _finite(devices: dict[str, dict]) -> dict[str, dict]:
+    """The devices whose free runs are finite (and the model's positive)."""
+    return {k: d for k, d in devices.items()
+            if math.isfinite(d["sim_rmse_rad_s"]) and math.isfinite(d["sim_rmse_model_rad_s"])
+            and d["sim_rmse_model_rad_s"] > 0.0}
+
+
 def devices_verdict(devices: dict[str, dict], min_gain: float) -> str:
     """Which measuring device takes up the most of a drift, in words (a description, not a
     name).  ``devices`` maps each device's id to its refit beside the model:
@@ -736,21 +764,18 @@ def devices_verdict(devices: dict[str, dict], min_gain: float) -> str:
     it.  A device takes up the drift when it cuts that error by half of ``min_gain`` (a
     fraction) or more; one takes up the most when, besides, its error is that much below
     every other device's.  Devices whose figures are not finite are left out."""
-    devices = {k: d for k, d in devices.items()
-               if math.isfinite(d["sim_rmse_rad_s"]) and math.isfinite(d["sim_rmse_model_rad_s"])
-               and d["sim_rmse_model_rad_s"] > 0.0}
+    lead = lead_device(devices, min_gain)
+    if lead is not None:
+        return (f"of these, {DEVICE_WORDS[lead][0]} takes up the most of it (a description, "
+                f"not a name)")
+    devices = _finite(devices)
     if not devices:
         return "no device could be refitted beside the model"
-    cut = {k: 1.0 - d["sim_rmse_rad_s"] / d["sim_rmse_model_rad_s"] for k, d in devices.items()}
-    best = min(devices, key=lambda k: devices[k]["sim_rmse_rad_s"])
     need = 0.5 * min_gain
-    e = devices[best]["sim_rmse_rad_s"]
-    if cut[best] < need:
+    if all(1.0 - d["sim_rmse_rad_s"] / d["sim_rmse_model_rad_s"] < need
+           for d in devices.values()):
         return (f"no device takes up much of it (each cuts the free run on all trials by less "
                 f"than {100 * need:.0f} %)")
-    if all(e <= (1.0 - need) * d["sim_rmse_rad_s"] for k, d in devices.items() if k != best):
-        return (f"of these, {DEVICE_WORDS[best][0]} takes up the most of it (a description, "
-                f"not a name)")
     return (f"no device takes up clearly more of it than the others (free runs within "
             f"{100 * need:.0f} % of each other): its shape is not told")
 

@@ -63,7 +63,10 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             Wald test of "no torque"; phase_rad and torque_ci95_N_m are
                             null where it is sized from the residual alone.  drift
                             true: a drift during the drive along axis "time", "hv_time"
-                            or "speed" (residual.drive_trend); drift_devices {hv_loss,
+                            or "speed" (residual.drive_trend; the axis of the measuring
+                            device that takes up the most of it instead, when that axis
+                            shows it too: consistency.lead_device, residual.drift_along);
+                            drift_devices {hv_loss,
                             on_lag: {value, unit, wald_p, sim_rmse_rad_s,
                             sim_rmse_model_rad_s}}: each measuring device (a force loss
                             growing with HV time, rate [1/s]; a force building up after

@@ -601,11 +601,15 @@ def signatures(diag: Diagnostics, inertia: float) -> list[Signature]:
     return out
 
 
+#: Each axis of :data:`TREND_AXES` in words.
+TREND_LABEL = {"time": "time since the trial's start",
+               "hv_time": "accumulated HV on-time of the driven actuator", "speed": "speed"}
+
+
 def trend_signature(tr: Trend, inertia: float) -> Signature:
     """The drive trend ``tr`` in words, as a signature along its axis (not periodic);
     ``inertia`` [kg*m^2] (J/L) turns accelerations into torques."""
-    label = {"time": "time since the trial's start", "hv_time": "accumulated HV on-time of "
-             "the driven actuator", "speed": "speed"}
+    label = TREND_LABEL
     what = "grows" if tr.slope > 0 else "falls"
     text = (f"drifts during each drive: the unmodelled acceleration changes along "
             f"{label[tr.axis]}, +-{tr.amplitude:.3g} rad/s^2 ({tr.amplitude * inertia:.2g} N*m) "
@@ -622,6 +626,16 @@ def trend_signature(tr: Trend, inertia: float) -> Signature:
                  f"tell which of them the change follows")
     return Signature(tr.axis, tr.unit, None, tr.amplitude, tr.amplitude * inertia,
                      tr.p_value, text, drift=True)
+
+
+def drift_along(sig: Signature, tr: Trend, axis: str, because: str) -> None:
+    """Report the drift ``sig`` (the signature of the trend ``tr``) along ``axis`` (one of
+    :data:`TREND_AXES`) in place of the axis the regression read, for the reason
+    ``because`` (words): its unit and p-value become that axis's, and its text says so.
+    Changed in place."""
+    sig.text += (f"; reported along {TREND_LABEL[axis]} (p = {tr.p_values[axis]:.1e}), not "
+                 f"{TREND_LABEL[sig.axis]}, which the regression alone read: {because}")
+    sig.axis, sig.unit, sig.p_value = axis, AXES[axis][0], tr.p_values[axis]
 
 
 def autocorrelation_signature(diag: Diagnostics, inertia: float) -> Signature | None:

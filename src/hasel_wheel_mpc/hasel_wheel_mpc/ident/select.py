@@ -138,16 +138,18 @@ from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
 from .candidates import BY_ID, LIBRARY, Candidate
-from .consistency import (DEVICE_WORDS, HV_LOSS, ON_LAG, Consistency, can_measure_beside,
-                          can_measure_lag, devices_verdict, drift_stand_in, lag_stand_in,
-                          refit_beside, stand_in_reason, trial_consistency)
+from .consistency import (DEVICE_TREND_AXIS, DEVICE_WORDS, HV_LOSS, ON_LAG, Consistency,
+                          can_measure_beside, can_measure_lag, devices_verdict,
+                          drift_stand_in, lag_stand_in, lead_device, refit_beside,
+                          stand_in_reason, trial_consistency)
 from .data import Trial
 from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, effect_wald_p,
                   force_coordinates, wald_p)
 from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
-from .residual import Diagnostics, Signature, analyse, autocorrelation_signature
+from .residual import (TREND_SIGNIFICANCE, Diagnostics, Signature, analyse,
+                       autocorrelation_signature, drift_along)
 from .screen import SCREEN_P, Screening, bent, restart_from, screen
 from .threads import with_one_blas_thread
 
@@ -896,9 +898,17 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                     sig.text += (f"; with {noun} beside the model ({words(value)}, a "
                                  f"measuring device, never named; Wald p {p:.1e}), the free "
                                  f"run on all trials is {e:.4f} rad/s against {e_model:.4f}")
+        trend = diag.trend
         for sig in sigs:
             if len(sig.devices) > 1:
                 sig.text += "; " + devices_verdict(sig.devices, min_gain)
+                # the regression cannot tell axes that rose together; the device that
+                # takes up the most of the drift can: the drift is reported along its axis
+                # (where that axis too shows it)
+                axis = DEVICE_TREND_AXIS.get(lead_device(sig.devices, min_gain))
+                if (axis is not None and trend is not None and axis != sig.axis
+                        and trend.p_values[axis] < TREND_SIGNIFICANCE):
+                    drift_along(sig, trend, axis, "the device for it takes up the most")
     todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
     beside = measuring
     torque_beside = False          # the strongest periodic torque is beside the factors
