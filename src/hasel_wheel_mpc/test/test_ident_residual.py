@@ -1,5 +1,6 @@
 """Whiteness of the residual: the mean autocorrelation against its closed form, and the
 signature a correlated residual gets when no axis shows structure (ident/residual.py)."""
+import dataclasses
 import math
 import re
 
@@ -132,15 +133,21 @@ def test_a_drift_with_hv_time_is_found_with_its_slope_and_white_defects_give_non
 
 
 def test_a_drift_reported_along_another_axis_takes_that_axis_unit_and_p_value():
-    tr = R.Trend("speed", "rad/s", -0.004, 0.015, 8e-19,
+    # the trend's own p is adjusted for the three axes tried (3 x 8e-19); the new axis's is
+    # adjusted the same way (3 x 3e-9), and an axis that got no fit reads 1
+    tr = R.Trend("speed", "rad/s", -0.004, 0.015, 2.4e-18,
                  {"speed": 8e-19, "time": 1e-11, "hv_time": 3e-9}, {"time": 0.9, "hv_time": 0.9})
+    assert R.along_p(tr, "hv_time") == pytest.approx(9e-9, rel=1e-12)
+    assert R.along_p(dataclasses.replace(tr, p_values={"speed": 8e-19}), "hv_time") == 1.0
     sig = R.trend_signature(tr, 0.0357)
-    assert (sig.axis, sig.unit, sig.p_value) == ("speed", "rad/s", 8e-19)
+    assert (sig.axis, sig.unit, sig.p_value) == ("speed", "rad/s", 2.4e-18)
+    amplitude = sig.amplitude
     R.drift_along(sig, tr, "hv_time", "a reason")
-    assert (sig.axis, sig.unit, sig.p_value) == ("hv_time", "s", 3e-9) and sig.drift
+    assert (sig.axis, sig.unit) == ("hv_time", "s") and sig.drift
+    assert sig.p_value == pytest.approx(9e-9, rel=1e-12) and sig.amplitude == amplitude
     assert sig.text.endswith("; reported along accumulated HV on-time of the driven actuator "
-                             "(p = 3.0e-09), not speed, which the regression alone read: a "
-                             "reason")
+                             "(p = 9.0e-09), not speed, which the regression alone read (its "
+                             "size above is along that axis): a reason")
 
 
 def test_a_slow_drift_is_not_taken_for_a_period_but_a_real_one_is_found(windows):

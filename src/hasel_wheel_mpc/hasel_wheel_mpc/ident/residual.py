@@ -628,14 +628,23 @@ def trend_signature(tr: Trend, inertia: float) -> Signature:
                      tr.p_value, text, drift=True)
 
 
+def along_p(tr: Trend, axis: str) -> float:
+    """The p-value of the trend ``tr`` along ``axis``, adjusted as the trend's own is for
+    the :data:`TREND_AXES` tried (x their number, at most 1); 1 where that axis got no fit."""
+    return min(len(TREND_AXES) * tr.p_values.get(axis, 1.0), 1.0)
+
+
 def drift_along(sig: Signature, tr: Trend, axis: str, because: str) -> None:
     """Report the drift ``sig`` (the signature of the trend ``tr``) along ``axis`` (one of
     :data:`TREND_AXES`) in place of the axis the regression read, for the reason
-    ``because`` (words): its unit and p-value become that axis's, and its text says so.
-    Changed in place."""
-    sig.text += (f"; reported along {TREND_LABEL[axis]} (p = {tr.p_values[axis]:.1e}), not "
-                 f"{TREND_LABEL[sig.axis]}, which the regression alone read: {because}")
-    sig.axis, sig.unit, sig.p_value = axis, AXES[axis][0], tr.p_values[axis]
+    ``because`` (words): its unit and p-value (:func:`along_p`) become that axis's, and its
+    text says so.  Its amplitude and torque stay those of the curve fitted along the axis
+    the regression read.  Changed in place."""
+    p = along_p(tr, axis)
+    sig.text += (f"; reported along {TREND_LABEL[axis]} (p = {p:.1e}), not "
+                 f"{TREND_LABEL[sig.axis]}, which the regression alone read (its size above "
+                 f"is along that axis): {because}")
+    sig.axis, sig.unit, sig.p_value = axis, AXES[axis][0], p
 
 
 def autocorrelation_signature(diag: Diagnostics, inertia: float) -> Signature | None:

@@ -148,7 +148,7 @@ from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, effe
 from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
-from .residual import (TREND_SIGNIFICANCE, Diagnostics, Signature, analyse,
+from .residual import (TREND_SIGNIFICANCE, Diagnostics, Signature, along_p, analyse,
                        autocorrelation_signature, drift_along)
 from .screen import SCREEN_P, Screening, bent, restart_from, screen
 from .threads import with_one_blas_thread
@@ -899,7 +899,7 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                                  f"measuring device, never named; Wald p {p:.1e}), the free "
                                  f"run on all trials is {e:.4f} rad/s against {e_model:.4f}")
         trend = diag.trend
-        for sig in sigs:
+        for sig in list(sigs):
             if len(sig.devices) > 1:
                 sig.text += "; " + devices_verdict(sig.devices, min_gain)
                 # the regression cannot tell axes that rose together; the device that
@@ -907,8 +907,10 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                 # (where that axis too shows it)
                 axis = DEVICE_TREND_AXIS.get(lead_device(sig.devices, min_gain))
                 if (axis is not None and trend is not None and axis != sig.axis
-                        and trend.p_values[axis] < TREND_SIGNIFICANCE):
+                        and along_p(trend, axis) < TREND_SIGNIFICANCE):
                     drift_along(sig, trend, axis, "the device for it takes up the most")
+                    # the drift now describes that axis: a binned signature along it goes
+                    sigs[:] = [s for s in sigs if s is sig or s.axis != axis]
     todo = [i for i, sig in enumerate(sigs) if periodic.frequency(sig, base)][:MEASURED_SIGNATURES]
     beside = measuring
     torque_beside = False          # the strongest periodic torque is beside the factors
