@@ -9,6 +9,7 @@ import pytest
 from scipy import signal
 
 from hasel_wheel_mpc.ident import residual as R
+from hasel_wheel_mpc.ident.select import device_axis
 
 
 def _ar1(phi: float, n: int, seed: int = 0) -> np.ndarray:
@@ -148,6 +149,22 @@ def test_a_drift_reported_along_another_axis_takes_that_axis_unit_and_p_value():
     assert sig.text.endswith("; reported along accumulated HV on-time of the driven actuator "
                              "(p = 9.0e-09), not speed, which the regression alone read (its "
                              "size above is along that axis): a reason")
+
+
+@pytest.mark.parametrize("hv_p, errors, moved", [
+    (3e-9, (0.0345, 0.0633), "hv_time"),   # the HV-time loss leads, HV time shows the drift
+    (5e-5, (0.0345, 0.0633), None),        # HV time's adjusted p 1.5e-4: not significant
+    (3e-9, (0.0633, 0.0345), None),        # the switch-on lag leads: speed, already the axis
+    (3e-9, (0.0345, 0.0350), None)])       # no device leads by 5 %
+def test_a_drift_moves_to_the_axis_of_the_leading_device_only_where_that_axis_shows_it(
+        hv_p, errors, moved):
+    tr = R.Trend("speed", "rad/s", -0.004, 0.015, 2.4e-18,
+                 {"speed": 8e-19, "time": 1e-11, "hv_time": hv_p}, {"time": 0.9, "hv_time": 0.9})
+    sig = R.trend_signature(tr, 0.0357)
+    sig.devices = {k: {"sim_rmse_rad_s": e, "sim_rmse_model_rad_s": 0.0765}
+                   for k, e in zip(("hv_loss", "on_lag"), errors)}
+    assert device_axis(sig, tr, min_gain=0.1) == moved
+    assert device_axis(sig, None, min_gain=0.1) is None
 
 
 def test_a_slow_drift_is_not_taken_for_a_period_but_a_real_one_is_found(windows):

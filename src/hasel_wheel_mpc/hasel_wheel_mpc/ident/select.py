@@ -148,7 +148,7 @@ from .fit import (FitResult, FrictionEstimate, Problem, coastdown_friction, effe
 from . import actuator, periodic
 from .metrics import TrialMetrics, drift_text, fitted_metrics, pooled_rmse, trial_metrics
 from .prediction import PredictionResidual, prediction_residual
-from .residual import (TREND_SIGNIFICANCE, Diagnostics, Signature, along_p, analyse,
+from .residual import (TREND_SIGNIFICANCE, Diagnostics, Signature, Trend, along_p, analyse,
                        autocorrelation_signature, drift_along)
 from .screen import SCREEN_P, Screening, bent, restart_from, screen
 from .threads import with_one_blas_thread
@@ -902,12 +902,8 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
         for sig in list(sigs):
             if len(sig.devices) > 1:
                 sig.text += "; " + devices_verdict(sig.devices, min_gain)
-                # the regression cannot tell axes that rose together; the device that
-                # takes up the most of the drift can: the drift is reported along its axis
-                # (where that axis too shows it)
-                axis = DEVICE_TREND_AXIS.get(lead_device(sig.devices, min_gain))
-                if (axis is not None and trend is not None and axis != sig.axis
-                        and along_p(trend, axis) < TREND_SIGNIFICANCE):
+                axis = device_axis(sig, trend, min_gain)
+                if axis is not None:
                     drift_along(sig, trend, axis, "the device for it takes up the most")
                     # the drift now describes that axis: a binned signature along it goes
                     sigs[:] = [s for s in sigs if s is sig or s.axis != axis]
@@ -975,6 +971,21 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                     if why is not None and cid not in ident.chosen and cid not in noted:
                         noted.add(cid)
                         sig.text += f"; {why}"
+
+
+def device_axis(sig: Signature, trend: Trend | None, min_gain: float) -> str | None:
+    """The axis to report the drift ``sig`` (the signature of ``trend``) along in place of
+    the one the regression read, or None to keep it.  The regression cannot tell axes that
+    rose together; the measuring device that takes up the most of the drift
+    (:func:`~.consistency.lead_device`, with the search's ``min_gain``) can.  Its axis
+    (:data:`~.consistency.DEVICE_TREND_AXIS`) is taken when it differs from ``sig``'s and
+    the trend along it is significant too (:func:`~.residual.along_p` under
+    :data:`~.residual.TREND_SIGNIFICANCE`)."""
+    axis = DEVICE_TREND_AXIS.get(lead_device(sig.devices, min_gain))
+    if (axis is None or trend is None or axis == sig.axis
+            or along_p(trend, axis) >= TREND_SIGNIFICANCE):
+        return None
+    return axis
 
 
 def drift_signature(sig: Signature) -> bool:
