@@ -29,12 +29,13 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             the speed short of refusal, or changes within the
                             trials), else null; an exponent and its p are null where
                             they cannot be formed; beside_hv_loss {rate_per_s, values, wald_p,
-                            sim_rmse_rad_s, sim_rmse_without_rad_s}: a drifting effect
-                            refitted beside a force loss growing with HV time (the
-                            device's rate, the effect's own parameters there by name in
-                            their units, its Wald p there, the free run on all trials
+                            device_wald_p, sim_rmse_rad_s, sim_rmse_without_rad_s}: a
+                            drifting effect (or any rise lag) refitted beside a force
+                            loss growing with HV time (the device's rate, the effect's
+                            own parameters there by name in their units, its Wald p
+                            there, the device's own Wald p, the free run on all trials
                             with it and without it), null when not refitted;
-                            beside_on_lag {time_constant_s, values, wald_p,
+                            beside_on_lag {time_constant_s, values, wald_p, device_wald_p,
                             sim_rmse_rad_s, sim_rmse_without_rad_s}: the same for an
                             effect whose size grows with the speed (k > 0.5, p < 0.1),
                             refitted beside a force that builds up after each switch-on
@@ -68,12 +69,14 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             shows it too: consistency.lead_device, residual.drift_along);
                             drift_devices {hv_loss,
                             on_lag: {value, unit, wald_p, sim_rmse_rad_s,
-                            sim_rmse_model_rad_s}}: each measuring device (a force loss
-                            growing with HV time, rate [1/s]; a force building up after
-                            each switch-on, time constant [s]) refitted beside the final
-                            model, and the free run on all trials with it and without
-                            it, for a drift ({} otherwise, and without a device the model
-                            has an effect of its own form for);
+                            sim_rmse_model_rad_s, wald_p_together}}: each measuring
+                            device (a force loss growing with HV time, rate [1/s]; a
+                            force building up after each switch-on, time constant [s])
+                            refitted beside the final model, and the free run on all
+                            trials with it and without it, for a drift ({} otherwise,
+                            and without a device the model has an effect of its own
+                            form for); wald_p_together its Wald p with both devices
+                            refitted together beside the model (only when both are);
                             amplitude_rad_s2 is half the fitted curve's largest range
                             within a trial.  Axis "actuator": one force factor per
                             actuator, sized by a refit (ident/actuator.py), listed in
@@ -337,7 +340,8 @@ def _beside(b: Beside | None) -> dict | None:
         return None
     (key, value), = b.device.describe([b.value]).items()
     return {key: _num(value), "values": {k: _num(v) for k, v in b.values.items()},
-            "wald_p": _num(b.p), "sim_rmse_rad_s": _num(b.sim[0]),
+            "wald_p": _num(b.p), "device_wald_p": _num(b.device_p),
+            "sim_rmse_rad_s": _num(b.sim[0]),
             "sim_rmse_without_rad_s": _num(b.sim[1])}
 
 

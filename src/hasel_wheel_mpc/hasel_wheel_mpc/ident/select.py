@@ -898,6 +898,18 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                     sig.text += (f"; with {noun} beside the model ({words(value)}, a "
                                  f"measuring device, never named; Wald p {p:.1e}), the free "
                                  f"run on all trials is {e:.4f} rad/s against {e_model:.4f}")
+        # and refitted together: the one that stays significant beside the other is the
+        # loss that is there, whichever runs the trials better alone (together_lead)
+        if len(devices) > 1 and len(measuring[0]) > len(chosen) and any(
+                ON_LAG.id in s.devices for s in sigs):
+            say("refitting with both measuring devices beside the unexplained drift")
+            _, both = refit_beside(trials, base, measuring[0], measuring[1], ON_LAG, window,
+                                   threads)
+            for sig in sigs:
+                if drift_signature(sig):
+                    for device in devices:
+                        if device.id in sig.devices:
+                            sig.devices[device.id]["wald_p_together"] = wald_p(both, device)
         trend = diag.trend
         for sig in list(sigs):
             if len(sig.devices) > 1:
