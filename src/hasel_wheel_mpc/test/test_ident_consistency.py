@@ -433,14 +433,43 @@ def test_a_rise_lag_standing_in_for_weak_retention_is_refused_beside_the_loss():
     assert f"itself at Wald p {b.device_p:.1e}" in why
 
 
-def test_a_right_rise_lag_keeps_its_hold_beside_the_loss():
-    # the plant's 40 ms lag (seed 11): beside the device it keeps its time constant and its
-    # significance, and the device reads near nothing (not significant): kept
-    con, why = _lag_beside_loss(RISE, seed=11)
+@pytest.mark.parametrize("tau, seed, holds", [(0.04, 11, True), (0.02, 12, False)])
+def test_a_right_rise_lag_is_kept_beside_the_loss(tau, seed, holds):
+    # the plant's lag: beside the device it keeps its time constant and its significance,
+    # and the device reads near nothing (not significant).  A 40 ms lag (seed 11) holds
+    # there; a 20 ms lag (seed 12) sits at the free run's floor and does not (its free run
+    # no better than the device's alone), and is kept because the device is not
+    # significant beside it (LOOKALIKE_P): without that rule it would be refused
+    lag = {"rise_lag": {"enabled": True, "time_constant": {"value": tau, "unit": "s"}}}
+    con, why = _lag_beside_loss(lag, seed=seed)
     b = con.beside
-    assert why is None and b.holds()
-    assert b.values["tau"] == pytest.approx(0.04, rel=0.1) and b.p < 1e-20
+    assert why is None and b.holds() is holds
+    assert b.values["tau"] == pytest.approx(tau, rel=0.1) and b.p < 1e-6
     assert b.device_p > K.LOOKALIKE_P and b.value < 0.02
+    assert K.loss_caution(C.BY_ID["rise_lag"], con) is None
+
+
+def test_a_rise_lag_that_holds_beside_a_significant_loss_carries_a_caution():
+    # the search's figures with retention of 0.05/s, 3 x 34 s, seed 13 (README, Known gaps):
+    # the lag holds beside the device (a 5.4 % cut) while the device reads p = 1.8e-3
+    c = K.Consistency("rise_lag", ["tau"], ["a", "b", "c"], np.full((3, 1), 0.027),
+                      np.full((3, 1), 0.003), np.full(1, 0.027), 3.8, 2, 0.15,
+                      [3.2, 2.7, 2.2], 0.2, 0.56, 0.72)
+    lag = C.BY_ID["rise_lag"]
+    b = K.Beside(K.HV_LOSS, 0.0369, {"tau": 0.0197}, 2.2e-8, (0.0260, 0.0274), 0.1, 1.8e-3)
+    assert b.holds() and not K.drifts(c)
+    why = K.caution(lag, dataclasses.replace(c, beside=b))
+    assert why.startswith("rise_lag refitted beside a force loss that grows with the "
+                          "accumulated HV time (rate 0.0369/s, a measuring device, itself at "
+                          "Wald p 1.8e-03;")
+    assert "there it still holds, but so does the loss (under 0.01)" in why
+    assert why.endswith("a loss with the accumulated HV time (charge retention) may be what "
+                        "is there.")
+    # none when the loss is not significant, the lag does not hold, or it is not a rise lag
+    for other in (dataclasses.replace(b, device_p=0.2),
+                  dataclasses.replace(b, sim=(0.0272, 0.0274))):
+        assert K.loss_caution(lag, dataclasses.replace(c, beside=other)) is None
+    assert K.loss_caution(C.BY_ID["viscous_drag"], dataclasses.replace(c, beside=b)) is None
 
 
 def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():

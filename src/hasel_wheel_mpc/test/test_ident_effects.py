@@ -15,6 +15,7 @@ import pytest
 
 from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import select as SEL
+from hasel_wheel_mpc.ident import consistency as K
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.fit import Problem, force_coordinates, from_force_coordinates
 from hasel_wheel_mpc.ident import residual as RES
@@ -546,6 +547,25 @@ def test_a_rise_lag_standing_in_for_weak_retention_is_refused_though_it_does_not
     entry = next(u for u in data["unexplained"] if u["drift"])
     assert entry["axis"] == "hv_time"
     assert entry["drift_devices"]["hv_loss"]["wald_p_together"] == loss["wald_p_together"]
+
+
+def test_a_rise_lag_named_beside_a_significant_loss_carries_a_caution():
+    # retention of 0.05/s with the whole library, 3 x 34 s (plant seed 13): a known wrong
+    # name (README, Known gaps).  Retention is refused beside the switch-on lag, and the
+    # rise lag holds beside the HV-time loss by a thin margin, so it is named; but the loss
+    # is significant beside it, and the report says so.  If retention comes to be named
+    # here, rewrite this test to assert that instead
+    res = SEL.identify(_trials(_retention(0.05), seed=13), k_folds=3, analyse_residuals=False)
+    assert res.chosen == ("rise_lag",)
+    b = res.consistency["rise_lag"].beside
+    assert b.holds() and b.device_p < K.LOOKALIKE_P
+    assert b.value == pytest.approx(0.05, rel=0.3)
+    data = to_json(res, [], [])
+    (effect,) = data["effects"]
+    con = effect["consistency"]
+    assert con["beside_hv_loss"]["device_wald_p"] == b.device_p
+    assert "so a loss with the accumulated HV time (charge retention) may be what is there" \
+        in con["caution"]
 
 
 #: the sensor and link defects the plant makes besides the encoder's noise: random counts

@@ -617,8 +617,25 @@ def lean_caution(c: Candidate, con: Consistency | None) -> str | None:
 
 def caution(c: Candidate, con: Consistency | None) -> str | None:
     """Every caution on ``c`` refitted as ``con`` (:func:`lean_caution`,
-    :func:`drift_caution`), one sentence each; None when there is none."""
-    return " ".join(f"{s}." for s in (lean_caution(c, con), drift_caution(c, con)) if s) or None
+    :func:`drift_caution`, :func:`loss_caution`), one sentence each; None when there is
+    none."""
+    return " ".join(f"{s}." for s in (lean_caution(c, con), drift_caution(c, con),
+                                       loss_caution(c, con)) if s) or None
+
+
+def loss_caution(c: Candidate, con: Consistency | None) -> str | None:
+    """A caution when ``c``, a rise lag that does not drift (:data:`LOSS_LOOKALIKES`), still
+    holds beside :data:`HV_LOSS` while the device is significant beside it too (p under
+    :data:`LOOKALIKE_P`): the two are close in shape on these trials, and the loss may be
+    what is there; None otherwise.  Seen with retention of 0.05/s, 3 x 34 s, plant seed 13
+    (README, Known gaps)."""
+    b = None if con is None else con.beside
+    if (c.id not in LOSS_LOOKALIKES or b is None or drifts(con) or not b.holds()
+            or not b.device_p < LOOKALIKE_P):
+        return None
+    return (f"{c.id} {b.text(c.id)}: there it still holds, but so does the loss (under "
+            f"{LOOKALIKE_P:g}); on these trials the two weaken the pushes in close shapes, so "
+            f"a loss with the accumulated HV time (charge retention) may be what is there")
 
 
 def drift_caution(c: Candidate, con: Consistency | None) -> str | None:
@@ -660,8 +677,10 @@ HV_LOSS = Candidate("hv_loss", "actuator force lost with accumulated HV time (a 
 LOSS_LOOKALIKES = frozenset({"rise_lag"})
 #: ... which stands in when it does not hold beside the device while the device is
 #: significant beside it at this level.  Ad hoc, 3 x 34 s, a rise lag fitted on all trials
-#: and refitted beside the device: on retention of 0.05/s (plant seeds 3, 11-16) the device
-#: read p = 3.6e-25 to 1.9e-3 and the lag never held; on rise lags of 15-60 ms (seeds 3,
+#: (to convergence, from the default start: not the search's fits) and refitted beside the
+#: device: on retention of 0.05/s (plant seeds 3, 11-16) the device read p = 3.6e-25 to
+#: 1.9e-3 and the lag never held (in the search, with seed 13, it held: a cut of 5.4 %,
+#: :func:`loss_caution`); on rise lags of 15-60 ms (seeds 3,
 #: 11-13) the device read p >= 0.096, and the lags of 30 ms and more held while those of
 #: 15-20 ms did not (p 1.6e-4 to 2e-12, free runs 0-5 % worse than the device alone: at
 #: the free run's floor).  On 5 x 60 s (seed 3) a 20 ms lag: device p 0.99; retention of
@@ -751,8 +770,8 @@ def drift_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candid
         return None
     return (f"{effect.id} and a loss with the accumulated HV time weaken the pushes in close "
             f"shapes; {b.text(effect.id, need=True)}: there it no longer holds while the "
-            f"loss does (its Wald p {b.device_p:.1e}, under {LOOKALIKE_P:g}), so it stands in "
-            f"for a loss that grows with the HV time")
+            f"loss does (under {LOOKALIKE_P:g}), so it stands in for a loss that grows with "
+            f"the HV time")
 
 
 #: The measuring device for a size that grows with the speed (module docstring): the rise
@@ -806,7 +825,9 @@ def together_lead(devices: dict[str, dict]) -> str | None:
     This overrides the free runs: on short trials a look-alike can run them better than the
     loss that is there.  Ad hoc, 3 x 34 s, retention of 0.05/s outside the library (plant
     seed 12): alone beside the model the HV-time loss ran the trials at 0.0270 rad/s and the
-    switch-on lag at 0.0245, but together the loss read p = 6e-25 and the lag p = 1.0."""
+    switch-on lag at 0.0245, but together the loss read p = 8e-25 and the lag p = 1.0 (a p of
+    1 can also mean a parameter the fit leaves undetermined, :func:`~.fit.wald_p`: beside
+    the other device that device is then not needed either)."""
     ps = {k: d.get("wald_p_together", math.nan) for k, d in devices.items()}
     if len(ps) < 2 or not all(math.isfinite(p) for p in ps.values()):
         return None

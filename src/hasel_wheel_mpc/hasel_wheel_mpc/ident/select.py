@@ -56,14 +56,19 @@ Search (forward selection).  Starting from the nominal model:
      lag standing in for charge retention is slower in the second halves and no longer
      holds beside the device, so it is refused; a right drag that takes up part of a
      missing retention grows there too, but holds, and is kept with a caution
-     (:func:`~.consistency.drift_stand_in`).  When the model has a retention already, or
+     (:func:`~.consistency.drift_stand_in`).  A rise lag is refitted there whether it
+     drifts or not (:data:`~.consistency.LOSS_LOOKALIKES`): one that does not drift is
+     refused when it no longer holds while the device is significant beside it, and
+     carries a caution when it holds while the device is significant
+     (:func:`~.consistency.loss_caution`).  When the model has a retention already, or
      the effect is retention, no such refit runs and a drift is only a caution.  An
      effect whose size grows with the trials' speed (short of a refusal) is refitted
      beside a force that builds up after each switch-on (the device
      :data:`~.consistency.ON_LAG`): retention standing in for a rise lag no longer holds
      there and is refused (:func:`~.consistency.lag_stand_in`).  After the search, an
      unexplained drift is measured beside the final model by each device that can go
-     there (``Signature.devices``): a description, never a name.
+     there (``Signature.devices``), and by both together (:func:`_devices_together`,
+     :func:`~.consistency.together_lead`): a description, never a name.
      Checked on the fit on all trials of every refit, so a stand-in is refused before its
      folds, and is not "backed" (no second start, no pair).
 
@@ -630,9 +635,10 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     def refusal(f: FitResult, effects: tuple[Candidate, ...],
                 added: tuple[Candidate, ...]) -> str | None:
         """Why the values of ``added`` in the fit ``f`` cannot be the effect they name:
-        implausible values, a size that trends with the trials' speed, or a size that
-        changes within the trials and does not hold beside a measured change (once per
-        fit; :mod:`.consistency`)."""
+        implausible values, a size that trends with the trials' speed, a size that
+        changes within the trials (or a rise lag) and does not hold beside a measured
+        change, or a size that grows with the speed and does not hold beside a switch-on
+        lag (once per fit; :mod:`.consistency`)."""
         key = f.z.tobytes() + ("+".join(c.id for c in effects) + "|"
                                + "+".join(c.id for c in added)).encode()
         if key not in refused:
@@ -861,8 +867,10 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
     signatures a refit does not confirm go to ``ident.unconfirmed``).  ``stand_ins`` (id ->
     (candidate, why)) are the library effects refused as stand-ins for a trend with the
     trials' speed, ``within`` ((fit bytes, id) -> note) those refused beside a measuring
-    device: both say what a signature is not.  ``min_gain`` (a fraction) is the search's;
-    ``say`` reports progress."""
+    device: both say what a signature is not.  A drift is measured beside the model by each
+    measuring device that can go there, alone and (both) together, and says which takes up
+    the most (:func:`~.consistency.devices_verdict`).  ``min_gain`` (a fraction) is the
+    search's; ``say`` reports progress."""
     trials, base, window = ident.trials, ident.base, ident.window
     # what is left unexplained and periodic in an angle: sized by a refit (the residual
     # alone shows only what the fit did not already absorb), the strongest first
@@ -878,18 +886,20 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
         e_model = pooled_rmse(current.sim_fitted)
         devices = [d for d, can in ((HV_LOSS, can_measure_beside(chosen)),
                                     (ON_LAG, can_measure_lag(chosen))) if can]
+        alone: dict[str, FitResult] = {}            # device id -> its refit beside the model
         for device in devices:
             noun, words = DEVICE_WORDS[device.id]
             say(f"refitting with {noun} beside the unexplained drift (a measuring device)")
             problem, device_fit = refit_beside(trials, base, chosen, current.fit, device,
                                                window, threads)
-            if device is HV_LOSS:
-                measuring = (chosen + (HV_LOSS,), device_fit)
             value = device_fit.values[device.params[0].name]
             p = wald_p(device_fit, device)
             e = pooled_rmse(fitted_metrics(problem, device_fit, trials))
             if not (math.isfinite(value) and math.isfinite(e)):
                 continue                # a refit that failed measures nothing
+            alone[device.id] = device_fit
+            if device is HV_LOSS:
+                measuring = (chosen + (HV_LOSS,), device_fit)
             for sig in sigs:
                 if drift_signature(sig):
                     sig.devices[device.id] = {"value": value, "unit": device.params[0].unit,
@@ -900,16 +910,14 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                                  f"run on all trials is {e:.4f} rad/s against {e_model:.4f}")
         # and refitted together: the one that stays significant beside the other is the
         # loss that is there, whichever runs the trials better alone (together_lead)
-        if len(devices) > 1 and len(measuring[0]) > len(chosen) and any(
-                ON_LAG.id in s.devices for s in sigs):
-            say("refitting with both measuring devices beside the unexplained drift")
-            _, both = refit_beside(trials, base, measuring[0], measuring[1], ON_LAG, window,
-                                   threads)
+        together = _devices_together(trials, base, chosen, alone, window, threads, say)
+        if together is not None:
             for sig in sigs:
                 if drift_signature(sig):
                     for device in devices:
                         if device.id in sig.devices:
-                            sig.devices[device.id]["wald_p_together"] = wald_p(both, device)
+                            sig.devices[device.id]["wald_p_together"] = wald_p(together,
+                                                                               device)
         trend = diag.trend
         for sig in list(sigs):
             if len(sig.devices) > 1:
@@ -983,6 +991,24 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                     if why is not None and cid not in ident.chosen and cid not in noted:
                         noted.add(cid)
                         sig.text += f"; {why}"
+
+
+def _devices_together(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...],
+                      alone: dict[str, FitResult], window: float, threads: int,
+                      say: Callable[[str], None]) -> FitResult | None:
+    """The final model (``chosen``) with both measuring devices beside it, or None unless
+    each was refitted alone (``alone``: device id -> that refit).  It is fitted from each
+    device's refit with the other added at its start value, and the better fit of the
+    windows is kept, so neither device comes in second to a loss the other already took
+    up; None when neither fit is finite."""
+    if set(alone) != {HV_LOSS.id, ON_LAG.id}:
+        return None
+    say("refitting with both measuring devices beside the unexplained drift")
+    fits = [refit_beside(trials, base, chosen + (first,), alone[first.id], second, window,
+                         threads)[1]
+            for first, second in ((HV_LOSS, ON_LAG), (ON_LAG, HV_LOSS))]
+    fits = [f for f in fits if math.isfinite(f.rmse)]
+    return min(fits, key=lambda f: f.rmse) if fits else None
 
 
 def device_axis(sig: Signature, trend: Trend | None, min_gain: float) -> str | None:
