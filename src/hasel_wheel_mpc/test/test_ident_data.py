@@ -145,6 +145,26 @@ def test_the_measured_speed_bridges_isolated_encoder_glitches(trial):
     assert np.max(np.abs(measured_speed(glitched) - clean)) < 2 * 2 * math.pi / 1024 * weight
 
 
+@pytest.mark.parametrize("where", [0, -1])
+def test_a_glitch_at_either_end_is_rejected_as_one_inside_is(trial, where):
+    # the first and the last reading have one neighbour each; a random count there had been
+    # kept, and the first one put a speed spike of -36 rad/s and a wrong start into a
+    # trial's free run (benchmarks/sweep_ident.py, README)
+    from hasel_wheel_mpc.ident.metrics import measured_speed
+    assert D.clean_mask(trial.t, trial.angle).all()
+    cols = _columns(trial)
+    cols["angle"][where] += 1.5
+    glitched = D.Trial("glitched", **cols)
+    for modulo in (None, 2 * math.pi):
+        ok = D.clean_mask(glitched.t, glitched.angle, modulo=modulo)
+        # the end is rejected, and at most its neighbour with it (judged on the line through
+        # the glitch)
+        assert not ok[where] and ok.sum() >= ok.shape[0] - 2
+    # the compared speed at that end stays within a tenth of a rad/s of the clean trial's
+    # (the spike of a 1.5 rad jump over one sample would be hundreds of rad/s)
+    assert np.max(np.abs(measured_speed(glitched) - measured_speed(trial))) < 0.1
+
+
 def test_csv_round_trip_keeps_every_value(tmp_path, trial):
     p = tmp_path / "trial.csv"
     D.write_csv(trial, p)
