@@ -679,32 +679,47 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # coast-downs whose fit only stopped unconverged keep the steps, the scan and the
         # second start, which name their effects (bench_ident_effects.py gave the same choices
         # with the short fits; one screening of 5 x 60 s trials took 12 s with them, ad hoc)
+        # (unless the steps find nothing to refit: then the short fits are tried too, which
+        # costs that screening only where nothing would be named otherwise)
         crooked = bent(problem, current.fit)
-        if friction is not None and not problem.at_bounds(current.fit):
-            crooked = None
-        restart = None if crooked is None else restart_from(
-            problem, current.fit, dict(reference, tau_f=friction.tau_f if friction else
-                                       base.tau_f, brake_gain=base.brake_gain))
+        anchored = friction is not None and not problem.at_bounds(current.fit)
         noise = problem.noise(problem.residual(current.fit.z), len(current.fit.names))
 
-        def score(c: Candidate) -> Screening:
-            return screen(trials, base, chosen, current.fit, problem, c, window, ref, restart,
-                          noise)
+        def screen_all(short: bool) -> list[Screening]:
+            """Every candidate of ``todo`` screened, with the short fits from the reference
+            force law if ``short``."""
+            restart = None if not short else restart_from(
+                problem, current.fit, dict(reference, tau_f=friction.tau_f if friction else
+                                           base.tau_f, brake_gain=base.brake_gain))
 
-        # the costliest screens first, so that the threads finish together (a place costs a
-        # window solve, ~12 simulations, and a Jacobian, one per parameter; a scan up to
-        # one solve per grid value and place)
-        order = sorted(todo, key=lambda c: -((2 + 2 * len(c.screen_at)) * (17 + c.size)
-                                             + 24 * len(c.scan)))
-        with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
-            done = dict(zip((c.id for c in order), pool.map(score, order)))
-        scores = [done[c.id] for c in todo]
+            def score(c: Candidate) -> Screening:
+                return screen(trials, base, chosen, current.fit, problem, c, window, ref,
+                              restart, noise)
+
+            # the costliest screens first, so that the threads finish together (a place
+            # costs a window solve, ~12 simulations, and a Jacobian, one per parameter; a
+            # scan up to one solve per grid value and place)
+            order = sorted(todo, key=lambda c: -((2 + 2 * len(c.screen_at)) * (17 + c.size)
+                                                 + 24 * len(c.scan)))
+            with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
+                done = dict(zip((c.id for c in order), pool.map(score, order)))
+            return [done[c.id] for c in todo]
+
+        short = crooked is not None and not anchored
+        scores = screen_all(short)
+        promising, rivals = refit_order(scores, current.fit.rmse, min_gain, max_refits)
+        if crooked is not None and not short and not promising:
+            say(f"screened: nothing to refit, and the current fit looks bent ({crooked})")
+            short = True
+            scores = screen_all(short)
+            promising, rivals = refit_order(scores, current.fit.rmse, min_gain, max_refits)
+        if not short:
+            crooked = None
         ident.screenings.append(scores)
         if crooked is not None:
             say(f"the current fit looks bent ({crooked}): each candidate is also screened by a"
                 f" short fit from the reference force law")
         say("screened: " + ", ".join(f"{s.candidate} chi2 {s.statistic:.0f}" for s in scores))
-        promising, rivals = refit_order(scores, current.fit.rmse, min_gain, max_refits)
         evs: list[Evaluation] = []
 
         def refit(sc: Screening) -> Evaluation:
@@ -724,11 +739,14 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                 ev = evaluate(trials, base, chosen + (c,), window, dict(current.fit.values),
                               folds, threads, **gates)
             judge(ev, (c,), current, min_gain, odd_values(ev.fit))
-            if not ev.accepted and backed(ev, current, min_gain):
+            if not ev.accepted and (backed(ev, current, min_gain) or (
+                    stood_in(ev, current, min_gain) and not current.fit.converged)):
                 # the windows say the effect is there, the free run does not: the refit may
                 # have stayed in the current model's bent force law.  Once more, from the
                 # reference force law (the current model's other values, the candidate's
-                # screened start); the better fit of the windows on all trials is kept
+                # screened start); the better fit of the windows on all trials is kept.
+                # The same for a refit refused for its values while the current fit stopped
+                # at its limit: values fitted in a bent force law need not be the effect's
                 alt = evaluate(trials, base, chosen + (c,), window,
                                {**current.fit.values, **ref,
                                 **{p.name: sc.start[p.name] for p in c.params}},
