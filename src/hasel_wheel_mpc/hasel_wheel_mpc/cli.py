@@ -206,9 +206,13 @@ def cmd_link_run(args: argparse.Namespace) -> int:
             rec.command("/wheel0", cmd, s.t)
 
     cfg = P.Config(watchdog_ms=int(min(1000, 100 * max(1.0, args.time_scale))))
+    # bound before it starts: its reader thread may hand over the first sample at once (a
+    # sample that came before the name was bound lost the sequencer's first command, and the
+    # wheel coasted; seen in a clean-clone run on two busy cores)
     core = DriverCore(LinkConfig(str(link), enable_hv_on_connect=True, device_config=cfg),
                       on_sample=on_sample,
-                      on_event=lambda e: print(f"  link: {e}", file=sys.stderr)).start()
+                      on_event=lambda e: print(f"  link: {e}", file=sys.stderr))
+    core.start()
     try:
         t_end = time.monotonic() + args.seconds / args.time_scale
         while time.monotonic() < t_end:

@@ -144,10 +144,17 @@ def clean_mask(t: np.ndarray, y: np.ndarray, tol: float = GLITCH,
         return ok
     w = (t[1:-1] - t[:-2]) / (t[2:] - t[:-2])
     ok[1:-1] = np.abs(_off_line(y[1:-1], y[:-2], y[2:], w, modulo)) <= tol
+    if y.shape[0] < MIN_END_CHECK:
+        return ok
     for i, j, k in ((0, 1, 2), (-1, -2, -3)):           # the ends, on the next two samples
         w_end = (t[i] - t[j]) / (t[k] - t[j])
         ok[i] = abs(_off_line(y[i], y[j], y[k], w_end, modulo)) <= tol
     return ok
+
+
+#: The fewest readings whose ends :func:`clean_mask` judges: in fewer, one glitch next to both
+#: ends could leave fewer than two clean samples to bridge or unwrap along.
+MIN_END_CHECK = 5
 
 
 def _off_line(y, a, b, w, modulo: float | None):

@@ -756,6 +756,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
                     f"{1e3 * alt.fit.rmse:.3f} mrad")
                 if alt.fit.rmse < ev.fit.rmse:
                     judge(alt, (c,), current, min_gain, odd_values(alt.fit))
+                    if alt.plausible:
+                        # the values the first fit was refused for were the bent law's
+                        stand_ins.pop(c.id, None)
                     alt.reason += (f"; refitted from the reference force law (from its "
                                    f"screened start: window RMSE {1e3 * ev.fit.rmse:.3f} mrad, "
                                    f"refused)")
