@@ -574,12 +574,14 @@ def test_an_effect_refused_in_a_bent_fit_is_refitted_from_the_reference_law():
     # bent, and the eccentricity refitted from there (window RMSE 0.577 mrad, its amplitude
     # 3.8-7.4 mrad trial by trial) was refused as a stand-in; nothing was named, though the
     # true model runs the held-out trials 11x better.  A refit refused for its values while
-    # the current fit stopped at its limit is fitted once more from the reference force law
+    # the current fit stopped at its limit is fitted once more from the reference force law.
+    # (Its rival, the off-centre mass, is left out of the library here: refitted twice too,
+    # and refused as a stand-in both times, it cost the test 25 s)
     amp, phase = 0.009359965103300314, -1.73559707198218
     ecc = {"angle_eccentricity": {"enabled": True, "amplitude": {"value": amp, "unit": "rad"},
                                   "phase": {"value": phase, "unit": "rad"}}}
     res = SEL.identify(_trials(ecc, seed=9589), k_folds=3, max_effects=1,
-                       analyse_residuals=False)
+                       library=C.library(exclude=["com_offset"]), analyse_residuals=False)
     assert not res.nominal.fit.converged
     (ev,) = [e for r in res.rounds for e in r if e.effects == ("angle_eccentricity",)]
     assert ev.accepted and "refitted from the reference force law" in ev.reason

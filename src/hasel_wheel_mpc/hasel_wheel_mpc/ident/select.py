@@ -679,8 +679,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # coast-downs whose fit only stopped unconverged keep the steps, the scan and the
         # second start, which name their effects (bench_ident_effects.py gave the same choices
         # with the short fits; one screening of 5 x 60 s trials took 12 s with them, ad hoc)
-        # (unless the steps find nothing to refit: then the short fits are tried too, which
-        # costs that screening only where nothing would be named otherwise)
+        # (unless the steps find nothing to refit from the nominal model: then the short fits
+        # are tried too, which costs one screening only where nothing would be named
+        # otherwise; in every round it had doubled the time of an effect outside the library)
         crooked = bent(problem, current.fit)
         anchored = friction is not None and not problem.at_bounds(current.fit)
         noise = problem.noise(problem.residual(current.fit.z), len(current.fit.names))
@@ -708,7 +709,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         short = crooked is not None and not anchored
         scores = screen_all(short)
         promising, rivals = refit_order(scores, current.fit.rmse, min_gain, max_refits)
-        if crooked is not None and not short and not promising:
+        if crooked is not None and not short and not promising and not chosen:
             say(f"screened: nothing to refit, and the current fit looks bent ({crooked})")
             short = True
             scores = screen_all(short)
@@ -1014,6 +1015,12 @@ def _describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
                         sig.text += f"; {why}"
 
 
+#: Evaluation limit of each refit of both devices together (:func:`_devices_together`): each
+#: starts from one device's refit, run to convergence, and adds one parameter.  With the
+#: refits' own limit (150) the retention look-alike test on 5 x 60 s took 117 s.
+TOGETHER_NFEV = 30
+
+
 def _devices_together(trials: list[Trial], base: WheelParams, chosen: tuple[Candidate, ...],
                       alone: dict[str, FitResult], window: float, threads: int,
                       say: Callable[[str], None]) -> FitResult | None:
@@ -1026,7 +1033,7 @@ def _devices_together(trials: list[Trial], base: WheelParams, chosen: tuple[Cand
         return None
     say("refitting with both measuring devices beside the unexplained drift")
     fits = [refit_beside(trials, base, chosen + (first,), alone[first.id], second, window,
-                         threads)[1]
+                         threads, TOGETHER_NFEV)[1]
             for first, second in ((HV_LOSS, ON_LAG), (ON_LAG, HV_LOSS))]
     fits = [f for f in fits if math.isfinite(f.rmse)]
     return min(fits, key=lambda f: f.rmse) if fits else None
