@@ -9,9 +9,11 @@ encoder glitches and 0.2 % lost samples).  The tool gets the whole library and i
 nothing.  Each run prints what was chosen against the truth:
 
 * ``right``: exactly the effect switched on (nothing on data with none);
-* ``missed``: nothing named where an effect was on.  The true model's held-out error is
-  printed beside it: where it does not cut the nominal fit's by the tool's 10 % either, the
-  data cannot show the effect (``below the floor``);
+* ``missed``: nothing named where an effect was on.  The true model's simulation error
+  (the plant's own parameters, nothing fitted but each trial's start:
+  ``metrics.model_error``) is printed beside it: where it does not cut the nominal fit's
+  held-out error by the tool's 10 % either, the data cannot show the effect (``below the
+  floor``; an approximation of the tool's own gate, which compares held-out errors);
 * ``wrong``: any other name.  This must never happen.
 
 The estimate is printed against the truth (for the gain spread: the std of the fitted gains
