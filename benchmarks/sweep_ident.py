@@ -30,6 +30,7 @@ import math
 import time
 from dataclasses import dataclass
 
+import hasel_wheel_mpc  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
 import numpy as np
 
 from hasel_wheel_mpc.ident import candidates as C

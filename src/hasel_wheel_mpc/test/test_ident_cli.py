@@ -5,6 +5,7 @@ import math
 from hasel_wheel_mpc.cli import main
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.data import write_csv
+from hasel_wheel_mpc.numerics import blas_in_use
 from hasel_wheel_sim.plant import PlantConfig
 
 
@@ -24,6 +25,8 @@ def test_identify_writes_the_report_from_csv_files(tmp_path, capsys):
     assert {c["id"] for c in data["candidates"]} == {"viscous_drag", "com_offset"}
     assert (out / "model.yaml").exists() and (out / "report.md").exists()
     assert "chosen effects: none" in capsys.readouterr().out
+    # the BLAS that ran the fits is on record (numpy's and scipy's OpenBLAS)
+    assert data["numerics"] == blas_in_use() and data["numerics"]["blas"]
 
 
 def test_identify_names_the_row_and_column_of_a_bad_file(tmp_path, capsys):

@@ -107,6 +107,10 @@ figures                    [file names]
 identifiability            ["singular value  verdict: combination", ...] (when computed)
 closed_loop                {model: {rmse_rad_s, nrmse, segment_steady_error_percent,
                             decisions, braking}} (with ``--compare-plant``)
+numerics                   {blas: [{library, version, kernels}], coretype_env}: the BLAS
+                            that ran the fits and its kernel set (choices near a gate can
+                            differ between kernel sets; hasel_wheel_mpc.numerics pins
+                            "Haswell" on x86-64)
 =========================  ===============================================================
 
 The stable effect identifiers are those of :mod:`.candidates` (README, "Identification").
@@ -126,6 +130,7 @@ from . import plots
 from .candidates import BY_ID, Candidate
 from .consistency import Beside, Consistency, caution
 from .data import find_coasts
+from ..numerics import blas_in_use
 from ..paper import TABLE_III
 from .metrics import TrialMetrics, pooled_rmse
 from .prediction import PREDICTION_SPAN
@@ -271,6 +276,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
     after = ident.diagnostics_after
     return {
         "schema": SCHEMA,
+        "numerics": blas_in_use(),
         "trials": [{"name": tr.name, "source": tr.source, "duration_s": _num(tr.duration),
                     "samples": int(tr.t.shape[0]), "activations": len(tr.activations),
                     "coasts": len(find_coasts(tr))} for tr in ident.trials],
@@ -384,6 +390,9 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
     L: list[str] = ["# Identification report", ""]
     L += [f"{len(ident.trials)} trials, {sum(t['duration_s'] for t in data['trials']):.0f} s in "
           f"all; held-out validation by trial over {len(ident.folds)} folds.", ""]
+    blas = ", ".join(f"{b['library']} {b['version']} ({b['kernels']} kernels)"
+                     for b in data["numerics"]["blas"]) or "not known (no threadpoolctl)"
+    L += [f"Linear algebra: {blas}.", ""]
     L += ["## Result", ""]
     if ident.chosen:
         L += [f"**Chosen effect(s): {', '.join('`' + c + '`' for c in ident.chosen)}.**", ""]
