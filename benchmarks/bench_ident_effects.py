@@ -32,13 +32,16 @@ Run: ``.venv/bin/python benchmarks/bench_ident_effects.py`` (about 15 minutes; a
 from __future__ import annotations
 
 import math
+import re
 import time
 
+import hasel_wheel_mpc  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
 import numpy as np
 
 from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import metrics as M
+from hasel_wheel_mpc.ident import residual as RES
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.consistency import caution, leans
@@ -192,7 +195,15 @@ def run_two_and_outside() -> None:
         dt = time.perf_counter() - t0
         d = res.diagnostics_after
         sigs = "; ".join(s.text for s in d.signatures) or "none"
-        print(f"viscous drag 1.5e-3, 3 x 34 s, plant seed 12, {label}: chosen "
+        # what test_ident_effects.py asked of this data before the case moved here
+        if lib is C.LIBRARY:
+            ok = res.chosen == ("viscous_drag",) and not d.signatures
+        else:
+            ok = (res.chosen == () and len(d.signatures) == 1 and d.signatures[0].period is None
+                  and d.trend is not None and d.trend.slope < 0.0
+                  and d.trend.p_value < RES.TREND_SIGNIFICANCE)
+        print(f"viscous drag 1.5e-3, 3 x 34 s, plant seed 12, {label}: "
+              f"{'right' if ok else 'WRONG'}; chosen "
               f"{res.chosen or 'none'}; held-out simulation error "
               f"{res.nominal.sim_heldout_rmse:.4f} -> {res.final.sim_heldout_rmse:.4f} rad/s;"
               f" mean autocorrelation over 0.2 s {d.correlated_share:.4f} (white sd "
@@ -227,7 +238,16 @@ def run_sensor() -> None:
                  for e in r if "not the same in every trial" in e.reason]
         sigs = " | ".join(sig.text.split("; refitted to it")[0]
                           for sig in res.diagnostics_after.signatures)
-        print(f"  its candidate left out: chosen {res.chosen or 'none'}; refused as stand-ins: "
+        # what test_ident_effects.py asked of the 5 mrad case before it moved here: the
+        # off-centre mass refused, its torque growing with the speed (J e xi2^2: k near 2),
+        # and the structure reported once per wheel turn
+        com = [e for r in res.rounds for e in r if e.effects == ("com_offset",)]
+        k = re.search(r"speed\^k, k = ([+-][0-9.]+)", com[0].reason) if com else None
+        ok = (res.chosen == () and k is not None and 0.5 < float(k.group(1)) < 2.5
+              and any(s.axis == "wheel_angle" and abs(s.period / (2 * math.pi) - 1) < 0.02
+                      for s in res.diagnostics_after.signatures))
+        print(f"  its candidate left out: {'right' if ok else 'WRONG'}; chosen "
+              f"{res.chosen or 'none'}; refused as stand-ins: "
               f"{' / '.join(stand) or 'none'}; unexplained: {sigs or 'none'}; {dt:.0f} s")
 
 
@@ -255,20 +275,21 @@ def run_outside_library() -> None:
     print(line + f"; unconfirmed: {[u.axis for u in res.unconfirmed]}; {dt:.0f} s")
     look = {"rise lag 40 ms": ({"rise_lag": {"enabled": True,
                                              "time_constant": {"value": 0.04, "unit": "s"}}},
-                               "rise_lag", (11, 12, 13)),
+                               "rise_lag", (11, 12, 13), 1e6),
             "retention 0.2/s": ({"charge_retention": {"enabled": True,
                                                       "rate": {"value": 0.2, "unit": "1/s"},
                                                       "recovery": {"value": 300.0, "unit": "s"}}},
-                                "charge_retention", (11, 12, 13)),
+                                "charge_retention", (11, 12, 13), 1e6),
             "retention 0.05/s": ({"charge_retention": {"enabled": True,
                                                        "rate": {"value": 0.05, "unit": "1/s"},
                                                        "recovery": {"value": 300.0, "unit": "s"}}},
-                                 "charge_retention", (11, 12, 13))}
-    runs = [(label, effect, cid, seed, S.PAPER_SET) for label, (effect, cid, seeds) in look.items()
-            for seed in seeds]
-    runs += [(label, look[label][0], look[label][1], seed, S.SHORT_SET)
+                                 "charge_retention", (11, 12, 13), 10.0)}
+    runs = [(label, effect, cid, seed, S.PAPER_SET, apart)
+            for label, (effect, cid, seeds, apart) in look.items() for seed in seeds]
+    runs += [(label, *look[label][:2], seed, S.SHORT_SET, look[label][3])
              for label in ("rise lag 40 ms", "retention 0.2/s") for seed in (11, 12, 13)]
-    for label, effect, cid, seed, specs in runs:
+    wrong = 0
+    for label, effect, cid, seed, specs, apart in runs:
         trials = S.record_set(specs, config=PlantConfig(
             seed=seed, switching="tick", effects=effects_from_mapping({**ENCODER, **effect})))
         t0 = time.perf_counter()
@@ -301,13 +322,45 @@ def run_outside_library() -> None:
         beside = ["+".join(e.effects) + " " + e.reason[e.reason.index("refitted beside"):
                                                         e.reason.index(": there")]
                   for r in res.rounds for e in r if ": there it no longer holds" in e.reason]
+        verdict = look_alike_verdict(res, cid, apart)
+        wrong += verdict.startswith("WRONG")
         print(f"{label} outside the library, {len(specs)} x {specs[0].drive + specs[0].coast:.0f}"
-              f" s, seed {seed}: chosen "
+              f" s, seed {seed}: {verdict}; chosen "
               f"{res.chosen or 'none'} ({'; '.join(cautions) or 'no checks'}); held-out "
               f"simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
               f"{res.final.sim_heldout_rmse:.4f} rad/s; {drift}; other signatures "
               f"{others or 'none'}; unconfirmed {len(res.unconfirmed)}"
               + "".join(f"; refused {b}" for b in beside) + f"; {dt:.0f} s")
+    print(f"look-alikes outside the library: {len(runs) - wrong} of {len(runs)} right")
+
+
+#: the drift a look-alike left out of the library should leave: its own axis, and how many
+#: times less likely the other loss's axis must be (test_ident_effects.py asked the same of
+#: seed 11 on 5 x 60 s before these runs moved here; weak retention: only an order of
+#: magnitude, since speed is closer behind HV time there)
+LOOK_ALIKE_AXES = {"rise_lag": (("speed",), ("time", "hv_time")),
+                   "charge_retention": (("hv_time", "time"), ("speed",))}
+
+
+def look_alike_verdict(res: SEL.Identification, cid: str, apart: float) -> str:
+    """"right" when nothing is named, the drift is significant (p < 1e-20) and the only
+    signature reported is along ``cid``'s own axis, and the regression read it there with the
+    other loss's axis at least ``apart`` times less likely, or the measuring devices moved it
+    there ("right, moved by the devices"); else "WRONG: <why>"."""
+    own, other = LOOK_ALIKE_AXES[cid]
+    tr = res.diagnostics_after.trend
+    axes = [s.axis for s in res.diagnostics_after.signatures]
+    if res.chosen:
+        return f"WRONG: named {res.chosen}"
+    if tr is None or tr.p_value >= 1e-20:
+        return f"WRONG: drift {None if tr is None else f'p = {tr.p_value:.1e}'}"
+    if len(axes) != 1 or axes[0] not in own:
+        return f"WRONG: signatures along {axes}"
+    if tr.axis != axes[0]:
+        return "right, moved by the devices"
+    if not all(tr.p_values[k] > apart * tr.p_values[tr.axis] for k in other):
+        return f"WRONG: {other} within {apart:g}x of {tr.axis}"
+    return "right"
 
 
 def run_restarted() -> None:
