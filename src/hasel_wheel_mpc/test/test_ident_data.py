@@ -305,3 +305,33 @@ def test_a_glitch_in_the_tail_at_rest_does_not_keep_the_tail():
     cols = _columns(trial)
     cols["angle"][k:] += 0.5
     assert F.at_rest_trimmed(D.Trial("moved", **cols)).t.shape[0] == k + 2
+
+
+def test_a_coast_down_ends_where_the_wheel_rests_though_its_count_flickers():
+    # a wheel stopped between two encoder counts reads one or the other: the count changes
+    # long after the wheel stopped.  The coast-down must end where the rest begins, as the
+    # fit's trimming does, or the parabola takes in seconds of rest and reads a fraction of
+    # the deceleration (tau_f 0.0046 against 0.0104 N*m on such a trial before)
+    cfg = PlantConfig(seed=2, switching="tick", effects=effects_from_mapping(ENCODER))
+    trial = S.record(S.SyntheticTrial(math.radians(3.0), drive=6.0, coast=14.0), config=cfg)
+    (a, b), = trial.coasts
+    end = F.at_rest_trimmed(trial).t.shape[0]
+    assert b == end and trial.t[-1] - trial.t[b] > 1.0      # a second or more at rest
+    count = 2 * math.pi / 1024
+    cols = _columns(trial)
+    rest = np.arange(b, trial.t.shape[0])
+    cols["angle"][rest[::7]] += count                       # flickers to the next count
+    cols["angle"][rest[-5:-3]] += count                     # and near the end
+    flicker = D.Trial("flicker", **cols)
+    (c0, c1), = flicker.coasts
+    # the flicker widens what the band holds: the rest is judged to start a little later
+    assert c0 == a and 0.0 <= flicker.t[c1] - trial.t[b] < 0.1
+    base = WheelParams()
+    est = F.coastdown_friction([flicker], base)
+    assert est.tau_f == pytest.approx(base.tau_f, rel=0.02)
+    # what ending at the last count change would have read: far too little friction
+    last = int(np.flatnonzero(np.diff(cols["angle"][a:]))[-1]) + a + 1
+    t, y = flicker.t[a:last] - flicker.t[a], flicker.angle[a:last]
+    curv = np.polyfit(t, y, 2)[0]
+    alpha = -2.0 * curv
+    assert alpha * base.inertia * base.L / (base.r + base.L) < 0.8 * base.tau_f

@@ -270,18 +270,54 @@ def find_activations(tr: Trial) -> list[Activation]:
     return out
 
 
+#: How far a wheel at rest may read from where it stopped [rad]: two counts of the 10-bit
+#: encoder (6.1 mrad each) plus noise.
+REST_BAND = 0.015
+
+
+def rest_start(t: np.ndarray, angle: np.ndarray, band: float = REST_BAND) -> int | None:
+    """Index into ``angle`` (n,) [rad] of the first sample of the rest that ends the record:
+    from there to the end the angle stays within ``band`` [rad].  0 when the whole record is
+    at rest; None when it does not end at rest (fewer than two samples in the band).
+
+    The band is judged on the samples within ``band`` of the line through their neighbours
+    (:func:`clean_mask` at that tolerance; the last one, within ``band`` of the median of
+    the last three): a glitched reading at rest (a random count, as a faulty encoder gives)
+    would otherwise end the rest early.  A stopped wheel whose count flickers between two
+    neighbours stays at rest here, where "no count change" would end the rest at the last
+    flicker."""
+    n = angle.shape[0]
+    ok = clean_mask(t, angle, tol=band)
+    if n >= 3:
+        ok[-1] = abs(angle[-1] - np.median(angle[-3:])) <= band
+    clean = np.flatnonzero(ok)
+    if clean.size == 0:
+        return None
+    rev = angle[clean][::-1]
+    spread = np.maximum.accumulate(rev) - np.minimum.accumulate(rev)
+    if not (spread > band).any():
+        return 0
+    still = int(np.argmax(spread > band))        # clean samples at the end within the band
+    if still <= 1:
+        return None
+    return int(clean[clean.size - still])
+
+
 def find_coasts(tr: Trial, min_duration: float = MIN_COAST) -> list[tuple[int, int]]:
-    """Coast-down segments [a, b): nothing scheduled (n_a = -1), nothing on, wheel moving."""
+    """Coast-down segments [a, b): nothing scheduled (n_a = -1), nothing on, wheel moving.
+
+    A segment ends where the wheel comes to rest (:func:`rest_start`; the first sample at
+    rest is the last one kept): the samples at rest after it would pull the fitted
+    deceleration towards zero."""
     idle = (tr.n_a < 0) & (tr.q == 0)
     edges = np.flatnonzero(np.diff(np.concatenate(([False], idle, [False])).astype(np.int8)))
     out = []
     for a, b in zip(edges[::2], edges[1::2]):
-        # stop where the wheel stands still (no count change for 0.2 s)
-        moving = np.flatnonzero(np.abs(np.diff(tr.angle[a:b])) > 0)
-        if moving.size == 0:
-            continue
-        last = a + int(moving[-1]) + 1
-        if tr.t[last] - tr.t[a] >= min_duration:
+        rest = rest_start(tr.t[a:b], tr.angle[a:b])
+        if rest == 0:
+            continue                              # it never moved
+        last = b if rest is None else a + rest + 1
+        if tr.t[last - 1] - tr.t[a] >= min_duration:
             out.append((int(a), int(last)))
     return out
 

@@ -39,7 +39,7 @@ from hasel_wheel_sim.model import N_ACTUATORS, angle_readings, param_vector
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .candidates import Candidate, ParamSpec
-from .data import Trial, clean_mask
+from .data import REST_BAND, Trial, clean_mask, rest_start
 from .simulate import retention_charge, shoot_windows
 from .threads import run_split, with_one_blas_thread
 
@@ -628,30 +628,23 @@ def covariance(J: np.ndarray, scale: np.ndarray, s2: float, tol: float = 1e-10) 
     return cov
 
 
-def at_rest_trimmed(tr: Trial, band: float = 0.015) -> Trial:
+def at_rest_trimmed(tr: Trial, band: float = REST_BAND) -> Trial:
     """The trial without its tail at rest: from where the angle stays within ``band`` [rad]
-    (two encoder counts plus noise) to the end.  A stopped wheel tells nothing about the
-    parameters, and the speed it starts a window with is not determined.
+    to the end (:func:`~.data.rest_start`, the rule the coast-downs end by).  A stopped
+    wheel tells nothing about the parameters, and the speed it starts a window with is not
+    determined.
 
-    The band is judged on the samples within ``band`` of the line through their neighbours
-    (:func:`~.data.clean_mask` at that tolerance; the last one, within ``band`` of the median
-    of the last three): a glitched reading in the tail (a random count, as a faulty encoder
-    gives) would otherwise end the rest early, and keep a tail of rest whose constant
-    residual correlates the whole fit's (a 0.2 % glitch rate raised the mean autocorrelation
+    A glitched reading in the tail (a random count) is only left out of the band's judgement:
+    ending the rest there would keep a tail of rest whose constant residual correlates the
+    whole fit's (a 0.2 % glitch rate raised the mean autocorrelation
     :func:`~.residual.analyse` reports from 0.002 to 0.019 on clean 3 x 34 s data, plant seed
-    11, and so reported structure where there was none).  A reading left out this way is
-    only left out of the band: on 65 plant trials (ad hoc; 3 x 34 s and 5 x 60 s, plain
-    and realistic, five seeds) the trimming is the same as judged on every sample."""
-    ok = clean_mask(tr.t, tr.angle, tol=band)
-    if ok.shape[0] >= 3:
-        ok[-1] = abs(tr.angle[-1] - np.median(tr.angle[-3:])) <= band
-    clean = np.flatnonzero(ok)
-    rev = tr.angle[clean][::-1]
-    spread = np.maximum.accumulate(rev) - np.minimum.accumulate(rev)
-    still = int(np.argmax(spread > band))        # clean samples at the end within the band
-    if still <= 1:
+    11, and so reported structure where there was none).  On 65 plant trials (ad hoc; 3 x 34 s
+    and 5 x 60 s, plain and realistic, five seeds) the trimming is the same as judged on
+    every sample."""
+    rest = rest_start(tr.t, tr.angle, band)
+    if rest is None or rest == 0:
         return tr
-    last = int(clean[clean.size - still]) + 1    # up to the first of them
+    last = rest + 1                               # up to the first sample at rest
     if last >= tr.t.shape[0] or last < 30:
         return tr
     return tr.slice(0, last, tr.name)

@@ -860,6 +860,20 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
         # each chosen effect as it was checked trial by trial when it was added
         ident.consistency.update({i: checked[(best.fit.z.tobytes(), i)] for i in best.effects
                                   if (best.fit.z.tobytes(), i) in checked})
+    if chosen and not current.fit.converged:
+        # the chosen model's fit stopped at its limit, so its values and intervals are where
+        # it stopped, not a minimum: it runs on from there for one more limit, and the fit
+        # that went on is kept when it fits the windows no worse
+        more = evaluate(trials, base, chosen, window, dict(current.fit.values), folds, threads,
+                        x0=current.fit.x0)
+        say(f"the chosen model's fit stopped at its limit; run on from there: "
+            f"{'converged' if more.fit.converged else 'stopped again'} after "
+            f"{more.fit.nfev} more evaluations, window RMSE {1e3 * more.fit.rmse:.3f} mrad")
+        if more.fit.rmse <= current.fit.rmse:
+            more.accepted, more.plausible, more.wald_p = True, current.plausible, current.wald_p
+            more.reason = (f"{current.reason}; its fit ran on from where it stopped at its "
+                           f"limit ({current.fit.nfev} + {more.fit.nfev} evaluations)")
+            current = more
     ident.final = current
     if analyse_residuals:
         say("residual analysis")
