@@ -14,7 +14,6 @@ import pytest
 
 from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import select as SEL
-from hasel_wheel_mpc.ident import consistency as K
 from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.fit import Problem, force_coordinates, from_force_coordinates
 from hasel_wheel_mpc.ident import residual as RES
@@ -416,42 +415,13 @@ def test_retention_standing_in_for_a_rise_lag_outside_the_library_is_refused_bes
     assert entry["drift_devices"]["on_lag"]["value"] == lag["value"]
 
 
-def test_a_rise_lag_standing_in_for_charge_retention_is_refused_beside_the_measured_loss():
-    # retention of 0.2/s with its candidate left out, 3 x 34 s (plant seed 11): a rise lag
-    # cuts the held-out error (0.088 -> 0.056 rad/s, ad hoc) and was named, with a caution.
-    # Refitted on the halves of each drive it is slower in the second half of every trial;
-    # refitted beside a force loss that grows with HV time it is no longer needed, so it is
-    # refused, nothing is named, and the drift it took up is reported with that refusal
-    res = SEL.identify(_trials(_retention(0.2), seed=11), k_folds=3,
-                       library=C.library(exclude=["charge_retention"]))
-    why, drift = _refused_leaving_a_drift(res, "rise_lag")
-    assert "rise_lag changes within the trials" in why and "no longer holds" in why
-    # and how much of it a loss with HV time takes up: the device has retention's form
-    # (its 300 s recovery hardly acts in 34 s), so it takes the plant's rate, and the free
-    # run with it comes near the true model's (the plant's own parameters)
-    loss = drift.devices["hv_loss"]
-    assert loss["value"] == pytest.approx(0.2, rel=0.1)
-    with_device, without = loss["sim_rmse_rad_s"], loss["sim_rmse_model_rad_s"]
-    assert (f"with a force loss that grows with the accumulated HV time beside the model "
-            f"(rate {loss['value']:.3g}/s") in drift.text
-    # on these short drives the regression reads the drift along speed, as a rise lag's
-    # would; the two devices tell them apart (a force building up after each switch-on takes
-    # up far less), so the drift is reported along the HV time
-    assert with_device < 0.8 * drift.devices["on_lag"]["sim_rmse_rad_s"]
-    assert "of these, a force loss that grows with the accumulated HV time takes up the most" \
-        in drift.text
-    trend = res.diagnostics_after.trend
-    assert trend.axis == "speed" and drift.axis == "hv_time" and drift.unit == "s"
-    assert drift.p_value == pytest.approx(3 * trend.p_values["hv_time"]) and drift.p_value < 1e-4
-    assert "not speed, which the regression alone read" in drift.text
-    base = WheelParams()
-    truth = model_error(res.trials, base, (C.BY_ID["charge_retention"],),
-                        dict(force_coordinates(base), tau_f=base.tau_f, rate=0.2,
-                             recovery=300.0))
-    assert with_device < 1.25 * truth < without
-    data = to_json(res, [], [])
-    assert data["effects"] == [] and any("rise_lag took up part" in u["text"] and u["drift"]
-                                         for u in data["unexplained"])
+# Retention of 0.2/s with its candidate left out, 3 x 34 s (plant seed 11): a rise lag
+# that cuts the held-out error is refused, since it changes within the trials and no longer
+# holds beside a force loss growing with HV time, and the drift is reported along HV time
+# (the device that takes up the most), though the regression alone reads speed.
+# ``bench_ident_effects.py --outside-only`` prints its verdict (seeds 11-13); the refusal is
+# tested in test_ident_consistency.py (a drifting stand-in beside the measured loss), and
+# the report along the device's axis with weak retention below (seed 12).
 
 
 def test_a_rise_lag_standing_in_for_weak_retention_is_refused_though_it_does_not_drift():
@@ -482,23 +452,21 @@ def test_a_rise_lag_standing_in_for_weak_retention_is_refused_though_it_does_not
     assert entry["drift_devices"]["hv_loss"]["wald_p_together"] == loss["wald_p_together"]
 
 
-def test_a_rise_lag_named_beside_a_significant_loss_carries_a_caution():
-    # retention of 0.05/s with the whole library, 3 x 34 s (plant seed 13): a known wrong
-    # name (README, Known gaps).  Retention is refused beside the switch-on lag, and the
-    # rise lag holds beside the HV-time loss by a thin margin, so it is named; but the loss
-    # is significant beside it, and the report says so.  If retention comes to be named
-    # here, rewrite this test to assert that instead
+def test_weak_retention_is_not_taken_for_a_rise_lag_once_the_coast_downs_end_at_rest():
+    # retention of 0.05/s with the whole library, 3 x 34 s (plant seed 13).  While each
+    # coast-down ran on to the last change of a stopped wheel's flickering count, the rest
+    # went into the parabola, tau_f came out low, and a rise lag was named here (with a
+    # caution: it held beside the HV-time loss by a 5.4 % cut, 5 % needed).  With the
+    # coast-downs ending where the wheel rests, tau_f is the plant's and nothing is named:
+    # retention grows with the trials' speed and is refused, and beside the HV-time loss
+    # the rise lag no longer cuts the free run.  A miss (the loss is weak on these short
+    # trials), not a wrong name; the caution itself: test_ident_consistency.py
     res = SEL.identify(_trials(_retention(0.05), seed=13), k_folds=3, analyse_residuals=False)
-    assert res.chosen == ("rise_lag",)
-    b = res.consistency["rise_lag"].beside
-    assert b.holds() and b.device_p < K.LOOKALIKE_P
-    assert b.value == pytest.approx(0.05, rel=0.3)
-    data = to_json(res, [], [])
-    (effect,) = data["effects"]
-    con = effect["consistency"]
-    assert con["beside_hv_loss"]["device_wald_p"] == b.device_p
-    assert "so a loss with the accumulated HV time (charge retention) may be what is there" \
-        in con["caution"]
+    assert res.friction.tau_f == pytest.approx(WheelParams().tau_f, rel=0.02)
+    assert res.chosen == ()
+    why = {e.effects: e.reason for r in res.rounds for e in r}
+    assert "charge_retention grows with the speed" in why[("charge_retention",)]
+    assert "there it no longer holds while the loss does" in why[("rise_lag",)]
 
 
 def test_an_effect_refused_in_a_bent_fit_is_refitted_from_the_reference_law():
@@ -582,7 +550,8 @@ def test_a_platform_torque_through_a_delayed_link_is_found_with_an_unbent_force_
     platform = {"platform_disturbance": {"enabled": True,
                                          "torque": {"value": 0.004, "unit": "N*m"},
                                          "phase": {"value": 0.5, "unit": "rad"}}}
-    res = SEL.identify(_trials({**platform, **DEFECTS, **link}, seed=11), k_folds=3)
+    res = SEL.identify(_trials({**platform, **DEFECTS, **link}, seed=11), k_folds=3,
+                       analyse_residuals=False)
     assert res.chosen == ("platform_periodic",)
     assert res.final.sim_heldout_rmse < 0.5 * res.nominal.sim_heldout_rmse
     base = WheelParams()
