@@ -1,4 +1,4 @@
-"""The same numbers on every x86-64 machine: OpenBLAS's kernels pinned (no rclpy, no ROS).
+"""The same numbers on every Linux x86-64 machine with AVX2: OpenBLAS's kernels pinned (no rclpy).
 
 OpenBLAS, the BLAS that numpy and scipy wheels ship, picks its kernels for the CPU it finds
 (``DYNAMIC_ARCH``), and kernels for different CPUs sum in different orders.  The
@@ -7,7 +7,7 @@ convergence), and a fit that lands near a gate can fall on either side with the 
 its sums: on a machine where OpenBLAS chose its SkylakeX kernels (AVX-512), four
 end-to-end identification tests that pass with the Haswell kernels chose differently (one
 of them named nothing where two effects were planted).  Pinning one kernel set
-(``OPENBLAS_CORETYPE=Haswell``: AVX2 and FMA, on every x86-64 CPU since 2013) gives the
+(``OPENBLAS_CORETYPE=Haswell``: AVX2 and FMA, Intel Core since 2013, AMD since 2015) gives the
 same report for the same recording on every such machine, as Intel's MKL does with
 ``MKL_CBWR``.  The kernels are chosen when OpenBLAS loads, so the pin only works before the
 first ``import numpy``; the package imports this module first (``hasel_wheel_mpc/__init__``).

@@ -450,8 +450,9 @@ def test_a_right_rise_lag_is_kept_beside_the_loss(tau, seed, holds):
 
 
 def test_a_rise_lag_that_holds_beside_a_significant_loss_carries_a_caution():
-    # the search's figures with retention of 0.05/s, 3 x 34 s, seed 13 (README, Known gaps):
-    # the lag holds beside the device (a 5.4 % cut) while the device reads p = 1.8e-3
+    # the search's figures with retention of 0.05/s, 3 x 34 s, seed 13, while the
+    # coast-downs read tau_f low (README, Known gaps): the lag held beside the device (a
+    # 5.4 % cut) while the device read p = 1.8e-3
     c = K.Consistency("rise_lag", ["tau"], ["a", "b", "c"], np.full((3, 1), 0.027),
                       np.full((3, 1), 0.003), np.full(1, 0.027), 3.8, 2, 0.15,
                       [3.2, 2.7, 2.2], 0.2, 0.56, 0.72)

@@ -329,9 +329,20 @@ def test_a_coast_down_ends_where_the_wheel_rests_though_its_count_flickers():
     base = WheelParams()
     est = F.coastdown_friction([flicker], base)
     assert est.tau_f == pytest.approx(base.tau_f, rel=0.02)
-    # what ending at the last count change would have read: far too little friction
+    # the premise, on these data (no code of ours in it): ending at the last count change,
+    # as the coast-downs did, reads far too little friction
     last = int(np.flatnonzero(np.diff(cols["angle"][a:]))[-1]) + a + 1
     t, y = flicker.t[a:last] - flicker.t[a], flicker.angle[a:last]
     curv = np.polyfit(t, y, 2)[0]
     alpha = -2.0 * curv
     assert alpha * base.inertia * base.L / (base.r + base.L) < 0.8 * base.tau_f
+
+
+def test_rest_start_finds_the_rest_that_ends_a_record():
+    # moving, then resting within the band (a flicker of one count), then nothing at rest
+    t = np.arange(100) * 0.01
+    y = np.concatenate([np.linspace(0.0, 1.0, 60), np.full(40, 1.0)])
+    y[70::5] += 2 * np.pi / 1024
+    assert D.rest_start(t, y) == 59                 # the wheel reaches 1.0 at sample 59
+    assert D.rest_start(t, np.full(100, 0.3)) == 0  # never moved
+    assert D.rest_start(t, np.linspace(0.0, 5.0, 100)) is None    # 0.05 rad a sample to the end

@@ -679,9 +679,11 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
                 "unexplained", "metrics", "diagnostics", "paper_table3", "model_file",
                 "figures", "fits"):
         assert key in on_disk
-    # the model with the right effect converges well inside the evaluation limit
+    # the model with the right effect converges: here it stops at the limit of 100 and
+    # converges as it runs on from there (select.identify), and the report counts both runs
     final = on_disk["fits"]["final"]
-    assert final["converged"] is True and final["evaluations"] < 100
+    assert final["converged"] is True and 100 < final["evaluations"] < 200
+    assert "ran on from where it stopped" in com_identification.final.reason
     assert final == {"converged": com_identification.final.fit.converged,
                      "evaluations": com_identification.final.fit.nfev,
                      "message": com_identification.final.fit.message}

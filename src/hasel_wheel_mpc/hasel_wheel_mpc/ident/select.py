@@ -131,6 +131,7 @@ signature (:mod:`.residual`).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from typing import Callable
@@ -863,16 +864,29 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     if chosen and not current.fit.converged:
         # the chosen model's fit stopped at its limit, so its values and intervals are where
         # it stopped, not a minimum: it runs on from there for one more limit, and the fit
-        # that went on is kept when it fits the windows no worse
+        # that went on is kept when it fits the windows no worse.  Its held-out figures stay
+        # those of the folds fitted from where it stopped (each fold is fitted afresh on the
+        # other trials: 30 evaluations from the full fit's values), which saves refitting
+        # them
         more = evaluate(trials, base, chosen, window, dict(current.fit.values), folds, threads,
+                        refuse=lambda f: "run on: the folds are the stopped fit's",
                         x0=current.fit.x0)
         say(f"the chosen model's fit stopped at its limit; run on from there: "
             f"{'converged' if more.fit.converged else 'stopped again'} after "
             f"{more.fit.nfev} more evaluations, window RMSE {1e3 * more.fit.rmse:.3f} mrad")
         if more.fit.rmse <= current.fit.rmse:
-            more.accepted, more.plausible, more.wald_p = True, current.plausible, current.wald_p
+            # the same model nearer its minimum: the checks it passed are the stopped fit's
+            # (the consistency refits are not run again); its Wald p is its own, and its
+            # evaluations count both runs
+            more.fit = dataclasses.replace(more.fit, nfev=current.fit.nfev + more.fit.nfev)
+            more.accepted, more.plausible = True, current.plausible
+            more.heldout_rmse, more.heldout_per_trial = (current.heldout_rmse,
+                                                         current.heldout_per_trial)
+            more.sim_heldout, more.fold_values = current.sim_heldout, current.fold_values
+            more.wald_p = max(effect_wald_p(more.fit, c) for c in chosen)
             more.reason = (f"{current.reason}; its fit ran on from where it stopped at its "
-                           f"limit ({current.fit.nfev} + {more.fit.nfev} evaluations)")
+                           f"limit ({more.fit.nfev} evaluations in all; held-out figures from "
+                           f"the folds fitted from where it stopped)")
             current = more
     ident.final = current
     if analyse_residuals:
