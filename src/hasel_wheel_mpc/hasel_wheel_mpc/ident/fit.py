@@ -29,6 +29,7 @@ The same projected Jacobian gives the covariance with the starts marginalised.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,7 +41,7 @@ from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .candidates import Candidate, ParamSpec
 from .data import REST_BAND, Trial, clean_mask, rest_start
-from .simulate import retention_charge, shoot_windows
+from .simulate import retention_charge, shoot_errors, shoot_windows, solve_window_starts
 from .threads import run_split, with_one_blas_thread
 
 
@@ -386,21 +387,39 @@ class Problem:
 
     def _shoot(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray,
                x0: np.ndarray) -> np.ndarray:
-        self._shoot_windows(eta, gains, self._every, x0, pv, self._out1, self._out2)
-        return self.output_error(self._out1, pv)
+        """(n,) the output error [rad] (:meth:`output_error`) of every window shot from the
+        starts x0 (w, 2); the wheel's (xi1, xi2) are left in ``self._out1``, ``self._out2``."""
+        err = np.empty(self.n)
+        self._split(lambda part: shoot_errors(*self._inputs(eta, gains), part, x0, pv, self.y,
+                                              self._quantum_or_nan, self.ok, self._out1,
+                                              self._out2, err), self._every)
+        return err
+
+    @property
+    def _quantum_or_nan(self) -> float:
+        return math.nan if self.quantum is None else float(self.quantum)
+
+    def _inputs(self, eta: np.ndarray, gains: np.ndarray) -> tuple[np.ndarray, ...]:
+        """The compiled simulators' leading arguments: the data, sectors ``eta`` and
+        ``gains`` (each (n,)), and the window starts."""
+        return self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts
+
+    def _split(self, fn: Callable[[np.ndarray], None], windows: np.ndarray) -> None:
+        """``fn(part)`` for the listed windows, split over ``self.threads`` threads (windows
+        are independent and write disjoint samples, and the compiled simulators release the
+        GIL, so the result is the same bit for bit)."""
+        if self.threads == 1 or windows.size < 2 * self.threads:
+            fn(windows)
+        else:
+            run_split(fn, [windows[i::self.threads] for i in range(self.threads)])
 
     def _shoot_windows(self, eta: np.ndarray, gains: np.ndarray, windows: np.ndarray,
                        x0: np.ndarray, pv: np.ndarray, out1: np.ndarray,
                        out2: np.ndarray) -> None:
         """:func:`~.simulate.shoot_windows` of ``windows`` on this problem's data, split over
-        ``self.threads`` threads (windows are independent and write disjoint samples, and
-        the compiled simulator releases the GIL, so the result is the same bit for bit)."""
-        args = (self.t, self.q, eta, self.phi_a, self.on_time, gains, self.starts)
-        if self.threads == 1 or windows.size < 2 * self.threads:
-            shoot_windows(*args, windows, x0, pv, out1, out2)
-            return
-        run_split(lambda part: shoot_windows(*args, part, x0, pv, out1, out2),
-                  np.array_split(windows, self.threads))
+        ``self.threads`` threads (:meth:`_split`)."""
+        self._split(lambda part: shoot_windows(*self._inputs(eta, gains), part, x0, pv, out1,
+                                               out2), windows)
 
     def _window_sums(self, v: np.ndarray) -> np.ndarray:
         return np.add.reduceat(v, self.starts[:-1])
@@ -413,8 +432,8 @@ class Problem:
 
     def solve_starts(self, full: np.ndarray, x0: np.ndarray, iterations: int = 12
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Best window starts for the shared parameters ``full`` (Gauss-Newton, every window at
-        once: a window's residuals depend on its own start only).
+        """Best window starts for the shared parameters ``full`` (Gauss-Newton, each window on
+        its own: a window's residuals depend on its own start only).
 
         Returns (x0 (w, 2), residual (n,), d residual / d xi1_0 (n,), d residual / d xi2_0 (n,)).
         """
@@ -432,53 +451,19 @@ class Problem:
         encoder's resolution (1e-7 rad, 1e-6 rad/s) or has shrunk to 1/256.  Windows that have
         left are not simulated again, so a warm start costs a few simulations of the windows
         that still move, not ``iterations`` of the whole data set.
+
+        Each window iterates alone in compiled code (:func:`~.simulate.solve_window_starts`),
+        the windows split over the threads.  Its sums follow numpy's order, so the starts and
+        residuals are the bits the same rule gave written with numpy arrays over all windows
+        at once (tested); the Python work between the simulations, which had left the second
+        core idle for about half of a fit, is gone.
         """
-        x0 = x0.copy()
-        h1, h2 = 1e-6, 1e-6
-        lengths = np.diff(self.starts)
-        out = [np.zeros(self.n) for _ in range(2)]
-        scratch = np.zeros(self.n)
-        every = np.arange(self.n_windows)
-        self._shoot_windows(eta, gains, every, x0, pv, out[0], out[1])
-        r = self.output_error(out[0], pv)
-        cost = self._window_sums(r * r)
-        d1, d2 = np.zeros(self.n), np.zeros(self.n)
-        active = np.ones(self.n_windows, dtype=bool)
-        lam = np.ones(self.n_windows)                      # step length factor per window
-        stale = np.ones(self.n_windows, dtype=bool)        # derivatives not at x0
-
-        def derivatives(windows: np.ndarray) -> None:
-            sel = np.repeat(np.isin(every, windows), lengths)
-            for d, e, h in ((d1, (h1, 0.0), h1), (d2, (0.0, h2), h2)):
-                self._shoot_windows(eta, gains, windows, x0 + e, pv, out[1], scratch)
-                d[sel] = (self.output_error(out[1], pv)[sel] - r[sel]) / h
-            stale[windows] = False
-
-        for _ in range(iterations):
-            windows = np.flatnonzero(active)
-            if windows.size == 0:
-                break
-            derivatives(windows)
-            a11, a12, a22, det = self._normal(d1, d2)
-            g1, g2 = self._window_sums(d1 * r), self._window_sums(d2 * r)
-            step = np.column_stack([-(a22 * g1 - a12 * g2) / det, -(a11 * g2 - a12 * g1) / det])
-            step[~active] = 0.0
-            trial = x0 + lam[:, None] * step
-            np.maximum(trial[:, 1], 0.0, out=trial[:, 1])  # the wheel rolls forwards (or rests)
-            self._shoot_windows(eta, gains, windows, trial, pv, out[1], scratch)
-            r_try = self.output_error(out[1], pv)
-            cost_try = self._window_sums(r_try * r_try)
-            take = active & (cost_try <= cost)
-            x0[take] = trial[take]
-            cost[take] = cost_try[take]
-            sel = np.repeat(take, lengths)
-            r[sel] = r_try[sel]
-            stale |= take
-            small = (np.abs(step[:, 0]) < 1e-7) & (np.abs(step[:, 1]) < 1e-6)
-            lam = np.where(take, np.minimum(2.0 * lam, 1.0), 0.25 * lam)
-            active &= ~(take & small) & (lam >= 1.0 / 256)
-        if stale.any():
-            derivatives(np.flatnonzero(stale))
+        x0 = np.array(x0, dtype=float)         # a C-ordered copy, solved in place
+        r, d1, d2 = np.empty(self.n), np.empty(self.n), np.empty(self.n)
+        scratch = np.empty(self.n), np.empty(self.n), np.empty(self.n)
+        self._split(lambda part: solve_window_starts(
+            *self._inputs(eta, gains), part, x0, pv, self.y, self._quantum_or_nan, self.ok,
+            iterations, r, d1, d2, *scratch), self._every)
         return x0, r, d1, d2
 
     def _project(self, J: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:

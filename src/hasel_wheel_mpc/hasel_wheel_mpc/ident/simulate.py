@@ -52,6 +52,21 @@ def _rk4(x1: float, x2: float, h: float, q: float, eta: float, phi_a: float, gai
 
 
 @jit_kernel
+def shoot_window(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
+                 on_time: np.ndarray, gain: np.ndarray, a: int, b: int, x1: float, x2: float,
+                 pv: np.ndarray, out1: np.ndarray, out2: np.ndarray) -> None:
+    """One window of :func:`shoot_windows`: samples a..b-1, started from (x1 [rad],
+    x2 [rad/s]) at sample a.  Called, not inlined: the kernels below shoot at several places,
+    and an inlined copy of the RK4 step at each took numba about a minute to compile."""
+    out1[a] = x1
+    out2[a] = x2
+    for k in range(a, b - 1):
+        x1, x2 = _rk4(x1, x2, t[k + 1] - t[k], q[k], eta[k], phi_a[k], gain[k], on_time[k], pv)
+        out1[k + 1] = x1
+        out2[k + 1] = x2
+
+
+@jit_kernel
 def shoot_windows(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
                   on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray,
                   windows: np.ndarray, x0: np.ndarray, pv: np.ndarray, out1: np.ndarray,
@@ -68,17 +83,190 @@ def shoot_windows(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarr
     """
     for i in range(windows.shape[0]):
         w = windows[i]
+        shoot_window(t, q, eta, phi_a, on_time, gain, starts[w], starts[w + 1], x0[w, 0],
+                     x0[w, 1], pv, out1, out2)
+
+
+@jit_inline
+def sample_error(x1: float, k: int, y: np.ndarray, quantum: float, ok: np.ndarray,
+                 pv: np.ndarray) -> float:
+    """Simulated minus measured angle [rad] at sample k, for the simulated wheel angle x1
+    [rad]: what the model's sensor reads (:func:`~hasel_wheel_sim.model.angle_reading`)
+    minus y[k], or with encoder counts (``quantum`` [rad], NaN when the angles are not
+    counts) its distance from the count's interval [y[k], y[k] + quantum); 0 where ok[k] is
+    False.  The same bits as :meth:`~.fit.Problem.output_error` (numpy's clip, NaN kept)."""
+    if not ok[k]:
+        return 0.0
+    m = angle_reading(x1, pv)
+    if quantum != quantum:
+        return m - y[k]
+    lo = y[k]
+    hi = y[k] + quantum
+    c = m if (m != m or m > lo) else lo
+    c = c if (c != c or c < hi) else hi
+    return m - c
+
+
+@jit_kernel
+def _pairwise_dot(u: np.ndarray, v: np.ndarray, a: int, n: int) -> float:
+    """Sum of u[k] v[k] over k = a..a+n-1, in the order of numpy's pairwise summation (blocks
+    of up to 128 in eight running sums, halves above that), so the same bits as numpy's sum
+    of the products."""
+    if n < 8:
+        res = 0.0
+        for i in range(a, a + n):
+            res += u[i] * v[i]
+        return res
+    if n <= 128:
+        r0 = u[a] * v[a]
+        r1 = u[a + 1] * v[a + 1]
+        r2 = u[a + 2] * v[a + 2]
+        r3 = u[a + 3] * v[a + 3]
+        r4 = u[a + 4] * v[a + 4]
+        r5 = u[a + 5] * v[a + 5]
+        r6 = u[a + 6] * v[a + 6]
+        r7 = u[a + 7] * v[a + 7]
+        i = a + 8
+        end = a + n - n % 8
+        while i < end:
+            r0 += u[i] * v[i]
+            r1 += u[i + 1] * v[i + 1]
+            r2 += u[i + 2] * v[i + 2]
+            r3 += u[i + 3] * v[i + 3]
+            r4 += u[i + 4] * v[i + 4]
+            r5 += u[i + 5] * v[i + 5]
+            r6 += u[i + 6] * v[i + 6]
+            r7 += u[i + 7] * v[i + 7]
+            i += 8
+        res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+        while i < a + n:
+            res += u[i] * v[i]
+            i += 1
+        return res
+    n2 = n // 2
+    n2 -= n2 % 8
+    return _pairwise_dot(u, v, a, n2) + _pairwise_dot(u, v, a + n2, n - n2)
+
+
+@jit_inline
+def window_dot(u: np.ndarray, v: np.ndarray, a: int, b: int) -> float:
+    """Sum of u[k] v[k] over one window, samples a..b-1 (b > a): bit for bit what
+    ``np.add.reduceat(u * v, starts)`` gives for it (the first product, plus numpy's pairwise
+    sum of the rest)."""
+    return u[a] * v[a] + _pairwise_dot(u, v, a + 1, b - a - 1)
+
+
+@jit_inline
+def _window_errors(x: np.ndarray, a: int, b: int, y: np.ndarray, quantum: float,
+                   ok: np.ndarray, pv: np.ndarray, out: np.ndarray) -> None:
+    for k in range(a, b):
+        out[k] = sample_error(x[k], k, y, quantum, ok, pv)
+
+
+@jit_kernel
+def shoot_errors(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
+                 on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray, windows: np.ndarray,
+                 x0: np.ndarray, pv: np.ndarray, y: np.ndarray, quantum: float, ok: np.ndarray,
+                 out1: np.ndarray, out2: np.ndarray, err: np.ndarray) -> None:
+    """:func:`shoot_windows` (into out1, out2), then the output error of each listed window
+    into err (n,) [rad] (:func:`sample_error`; y, quantum, ok as there)."""
+    for i in range(windows.shape[0]):
+        w = windows[i]
         a = starts[w]
         b = starts[w + 1]
-        x1 = x0[w, 0]
-        x2 = x0[w, 1]
-        out1[a] = x1
-        out2[a] = x2
-        for k in range(a, b - 1):
-            x1, x2 = _rk4(x1, x2, t[k + 1] - t[k], q[k], eta[k], phi_a[k], gain[k],
-                          on_time[k], pv)
-            out1[k + 1] = x1
-            out2[k + 1] = x2
+        shoot_window(t, q, eta, phi_a, on_time, gain, a, b, x0[w, 0], x0[w, 1], pv, out1, out2)
+        _window_errors(out1, a, b, y, quantum, ok, pv, err)
+
+
+#: Forward-difference step of the window starts' derivatives [rad, rad/s].
+START_STEP = 1e-6
+
+
+@jit_kernel
+def _start_derivatives(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
+                       on_time: np.ndarray, gain: np.ndarray, a: int, b: int, s1: float,
+                       s2: float, pv: np.ndarray, y: np.ndarray, quantum: float, ok: np.ndarray,
+                       r: np.ndarray, d1: np.ndarray, d2: np.ndarray, out1: np.ndarray,
+                       out2: np.ndarray) -> None:
+    """d residual / d xi1_0 and / d xi2_0 over samples a..b-1 (forward differences of 1e-6
+    rad and 1e-6 rad/s from the start (s1, s2), whose residual is r) into d1, d2."""
+    shoot_window(t, q, eta, phi_a, on_time, gain, a, b, s1 + START_STEP, s2 + 0.0, pv, out1,
+                 out2)
+    for k in range(a, b):
+        d1[k] = (sample_error(out1[k], k, y, quantum, ok, pv) - r[k]) / START_STEP
+    shoot_window(t, q, eta, phi_a, on_time, gain, a, b, s1 + 0.0, s2 + START_STEP, pv, out1,
+                 out2)
+    for k in range(a, b):
+        d2[k] = (sample_error(out1[k], k, y, quantum, ok, pv) - r[k]) / START_STEP
+
+
+@jit_kernel
+def solve_window_starts(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
+                        on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray,
+                        windows: np.ndarray, x0: np.ndarray, pv: np.ndarray, y: np.ndarray,
+                        quantum: float, ok: np.ndarray, iterations: int, r: np.ndarray,
+                        d1: np.ndarray, d2: np.ndarray, out1: np.ndarray, out2: np.ndarray,
+                        trial: np.ndarray) -> None:
+    """Best start (xi1 [rad], xi2 [rad/s]) of each listed window for the parameter vector pv:
+    safeguarded Gauss-Newton on the window's own squared output error (see
+    :meth:`~.fit.Problem.starts_for`, which documents the rule).  Windows are independent, so
+    each runs its iterations alone (a window whose step was refused keeps its derivatives
+    rather than recomputing the same ones).
+
+    The arrays are as in :func:`shoot_errors`; x0 (w, 2) holds the starts to begin from and
+    gets the solved ones.  Writes the residual r, its derivatives d1, d2 by each window's
+    xi1_0 and xi2_0 (each (n,)) over the listed windows; out1, out2 and trial (n,) are
+    scratch."""
+    for i in range(windows.shape[0]):
+        w = windows[i]
+        a = starts[w]
+        b = starts[w + 1]
+        s1 = x0[w, 0]
+        s2 = x0[w, 1]
+        shoot_window(t, q, eta, phi_a, on_time, gain, a, b, s1, s2, pv, out1, out2)
+        _window_errors(out1, a, b, y, quantum, ok, pv, r)
+        cost = window_dot(r, r, a, b)
+        lam = 1.0                   # step length factor
+        stale = True                # derivatives not at (s1, s2)
+        for _ in range(iterations):
+            if stale:
+                _start_derivatives(t, q, eta, phi_a, on_time, gain, a, b, s1, s2, pv, y,
+                                   quantum, ok, r, d1, d2, out1, out2)
+                stale = False
+            a11 = window_dot(d1, d1, a, b)
+            a12 = window_dot(d1, d2, a, b)
+            a22 = window_dot(d2, d2, a, b)
+            det = a11 * a22 - a12 * a12
+            if not abs(det) > 1e-30:
+                det = math.inf
+            g1 = window_dot(d1, r, a, b)
+            g2 = window_dot(d2, r, a, b)
+            step1 = -(a22 * g1 - a12 * g2) / det
+            step2 = -(a11 * g2 - a12 * g1) / det
+            t1 = s1 + lam * step1
+            t2 = s2 + lam * step2
+            if not (t2 >= 0.0 or t2 != t2):        # the wheel rolls forwards (or rests)
+                t2 = 0.0
+            shoot_window(t, q, eta, phi_a, on_time, gain, a, b, t1, t2, pv, out1, out2)
+            _window_errors(out1, a, b, y, quantum, ok, pv, trial)
+            cost_try = window_dot(trial, trial, a, b)
+            take = cost_try <= cost
+            if take:
+                s1 = t1
+                s2 = t2
+                cost = cost_try
+                for k in range(a, b):
+                    r[k] = trial[k]
+                stale = True
+            small = abs(step1) < 1e-7 and abs(step2) < 1e-6
+            lam = min(2.0 * lam, 1.0) if take else 0.25 * lam
+            if (take and small) or not lam >= 1.0 / 256:
+                break
+        if stale:
+            _start_derivatives(t, q, eta, phi_a, on_time, gain, a, b, s1, s2, pv, y, quantum,
+                               ok, r, d1, d2, out1, out2)
+        x0[w, 0] = s1
+        x0[w, 1] = s2
 
 
 @jit_inline

@@ -1,0 +1,150 @@
+"""The compiled window-start solver gives the bits of the array version it replaced.
+
+:meth:`~hasel_wheel_mpc.ident.fit.Problem.starts_for` runs each window's safeguarded
+Gauss-Newton in compiled code (:func:`~hasel_wheel_mpc.ident.simulate.solve_window_starts`).
+The rule was first written with numpy arrays over all windows at once; that version is kept
+here, word for word, as the reference.  Every choice the identification makes downstream
+follows these numbers, so they must not move in the last bit: the residual, the starts and
+their derivatives are compared with ``assert_array_equal``, not a tolerance.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from hasel_wheel_mpc.ident import candidates as C
+from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.ident.fit import Problem
+from hasel_wheel_mpc.ident.simulate import window_dot
+from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.plant import PlantConfig
+
+
+def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20):
+    """The array version of :meth:`Problem.starts_for` (every window at once)."""
+    x0 = x0.copy()
+    h1, h2 = 1e-6, 1e-6
+    lengths = np.diff(problem.starts)
+    out = [np.zeros(problem.n) for _ in range(2)]
+    scratch = np.zeros(problem.n)
+    every = np.arange(problem.n_windows)
+    problem._shoot_windows(eta, gains, every, x0, pv, out[0], out[1])
+    r = problem.output_error(out[0], pv)
+    cost = problem._window_sums(r * r)
+    d1, d2 = np.zeros(problem.n), np.zeros(problem.n)
+    active = np.ones(problem.n_windows, dtype=bool)
+    lam = np.ones(problem.n_windows)
+    stale = np.ones(problem.n_windows, dtype=bool)
+
+    def derivatives(windows):
+        sel = np.repeat(np.isin(every, windows), lengths)
+        for d, e, h in ((d1, (h1, 0.0), h1), (d2, (0.0, h2), h2)):
+            problem._shoot_windows(eta, gains, windows, x0 + e, pv, out[1], scratch)
+            d[sel] = (problem.output_error(out[1], pv)[sel] - r[sel]) / h
+        stale[windows] = False
+
+    for _ in range(iterations):
+        windows = np.flatnonzero(active)
+        if windows.size == 0:
+            break
+        derivatives(windows)
+        a11, a12, a22, det = problem._normal(d1, d2)
+        g1, g2 = problem._window_sums(d1 * r), problem._window_sums(d2 * r)
+        step = np.column_stack([-(a22 * g1 - a12 * g2) / det, -(a11 * g2 - a12 * g1) / det])
+        step[~active] = 0.0
+        trial = x0 + lam[:, None] * step
+        np.maximum(trial[:, 1], 0.0, out=trial[:, 1])
+        problem._shoot_windows(eta, gains, windows, trial, pv, out[1], scratch)
+        r_try = problem.output_error(out[1], pv)
+        cost_try = problem._window_sums(r_try * r_try)
+        take = active & (cost_try <= cost)
+        x0[take] = trial[take]
+        cost[take] = cost_try[take]
+        sel = np.repeat(take, lengths)
+        r[sel] = r_try[sel]
+        stale |= take
+        small = (np.abs(step[:, 0]) < 1e-7) & (np.abs(step[:, 1]) < 1e-6)
+        lam = np.where(take, np.minimum(2.0 * lam, 1.0), 0.25 * lam)
+        active &= ~(take & small) & (lam >= 1.0 / 256)
+    if stale.any():
+        derivatives(np.flatnonzero(stale))
+    return x0, r, d1, d2
+
+
+@pytest.fixture(scope="module")
+def trials():
+    specs = tuple(S.SyntheticTrial(math.radians(a), drive=6.0, coast=2.0) for a in (2.0, 7.0))
+    effects = {**S.ENCODER,
+               "com_offset": {"enabled": True, "torque": {"value": 0.004, "unit": "N*m"},
+                              "phase": {"value": 0.5, "unit": "rad"}}}
+    return S.record_set(specs, config=PlantConfig(seed=5, switching="tick",
+                                                  effects=effects_from_mapping(effects)))
+
+
+def _inputs(problem: Problem, values: dict[str, float]):
+    theta = np.array([values.get(problem.specs[i].name, problem.specs[i].start)
+                      for i in problem.free])
+    pv, extra = problem.model(problem.full_theta(theta * 1.02))
+    return pv, problem.eta + extra.get("eta_offset", 0.0), problem.gains(pv)
+
+
+CASES = {
+    # encoder counts: the error is the distance from the count's interval
+    "encoder": (dict(), (), {}),
+    # the angles taken as they are (motion capture)
+    "angles as read": (dict(quantised=False), (), {}),
+    # an eccentric sensor (cos, sin in every sample) and gains that fall with the HV time
+    "eccentric sensor, retention": (dict(), ("angle_eccentricity", "charge_retention"),
+                                    {"E": 0.01, "F": -0.004, "rate": 0.02, "recovery": 30.0}),
+    # samples outside [1 s, 6 s) do not count (ok False): windows with none and with some
+    "samples left out": (dict(keep=(1.0, 6.0)), (), {}),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize("threads", [1, 2])
+def test_compiled_window_starts_are_the_array_versions_bits(trials, case, threads):
+    kwargs, ids, values = CASES[case]
+    problem = Problem(trials, candidates=C.library(list(ids)) if ids else (), threads=threads,
+                      **kwargs)
+    pv, eta, gains = _inputs(problem, values)
+    x0 = problem.initial_starts()
+    x0[::3, 1] += 0.5                    # some windows start far off and need many steps
+    for iterations in (0, 3, 20):
+        got = problem.starts_for(pv, eta, gains, x0, iterations)
+        want = reference_starts(problem, pv, eta, gains, x0, iterations)
+        for a, b in zip(got, want):
+            np.testing.assert_array_equal(a, b)
+    # the solve moved the starts and cut the error (the comparison is not of two no-ops)
+    r_start = reference_starts(problem, pv, eta, gains, x0, 0)[1]
+    assert float(got[1] @ got[1]) < 0.5 * float(r_start @ r_start)
+    assert not np.array_equal(got[0], x0)
+
+
+def test_the_fused_shot_is_the_output_error_of_the_simulation(trials):
+    problem = Problem(trials, candidates=C.library(["angle_eccentricity"]), threads=2)
+    pv, eta, gains = _inputs(problem, {"E": 0.01, "F": 0.003})
+    x0 = problem.initial_starts()
+    err = problem._shoot(pv, eta, gains, x0)
+    x1, x2 = np.zeros(problem.n), np.zeros(problem.n)
+    problem._shoot_windows(eta, gains, np.arange(problem.n_windows), x0, pv, x1, x2)
+    np.testing.assert_array_equal(err, problem.output_error(x1, pv))
+    np.testing.assert_array_equal(problem._out1, x1)
+
+
+@pytest.mark.parametrize("lengths", [[1], [2, 7, 8, 9], [127, 128, 129], [255, 256, 257, 300],
+                                     [1000, 4097, 3]])
+def test_window_dot_sums_in_numpys_order(lengths):
+    rng = np.random.default_rng(len(lengths))
+    starts = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+    # magnitudes over 12 decades, so another order of the sum would round differently
+    u = rng.standard_normal(starts[-1]) * 10.0 ** rng.uniform(-8, 4, starts[-1])
+    v = rng.standard_normal(starts[-1])
+    want = np.add.reduceat(u * v, starts[:-1])
+    got = np.array([window_dot(u, v, starts[w], starts[w + 1]) for w in range(len(lengths))])
+    np.testing.assert_array_equal(got, want)
+    # and the order matters: a running sum from the first product rounds differently
+    if max(lengths) > 128:
+        running = np.array([np.cumsum(u[a:b] * v[a:b])[-1]
+                            for a, b in zip(starts[:-1], starts[1:])])
+        assert not np.array_equal(running, want)
