@@ -1,11 +1,13 @@
-"""The compiled window-start solver gives the bits of the array version it replaced.
+"""The compiled window-start solver and Jacobian give the bits of the array versions they
+replaced.
 
 :meth:`~hasel_wheel_mpc.ident.fit.Problem.starts_for` runs each window's safeguarded
-Gauss-Newton in compiled code (:func:`~hasel_wheel_mpc.ident.simulate.solve_window_starts`).
-The rule was first written with numpy arrays over all windows at once; that version is kept
-here, word for word, as the reference.  Every choice the identification makes downstream
-follows these numbers, so they must not move in the last bit: the residual, the starts and
-their derivatives are compared with ``assert_array_equal``, not a tolerance.
+Gauss-Newton in compiled code (:func:`~hasel_wheel_mpc.ident.simulate.solve_window_starts`),
+and :meth:`~hasel_wheel_mpc.ident.fit.Problem.jacobian` shoots its columns and projects the
+starts out there too.  Both were first written with numpy arrays over all windows at once;
+those versions are kept here, word for word, as the references.  Every choice the
+identification makes downstream follows these numbers, so they must not move in the last
+bit: they are compared with ``assert_array_equal``, not a tolerance.
 """
 import math
 
@@ -20,6 +22,39 @@ from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.plant import PlantConfig
 
 
+def window_sums(problem: Problem, v):
+    return np.add.reduceat(v, problem.starts[:-1])
+
+
+def normal(problem: Problem, d1, d2):
+    a11, a12, a22 = (window_sums(problem, d1 * d1), window_sums(problem, d1 * d2),
+                     window_sums(problem, d2 * d2))
+    det = a11 * a22 - a12 * a12
+    return a11, a12, a22, np.where(np.abs(det) > 1e-30, det, np.inf)
+
+
+def reference_jacobian(problem: Problem, theta, x0, r, d1, d2):
+    """The array version of :meth:`Problem.jacobian` (and of its projection)."""
+    J = np.empty((problem.n, theta.size))
+    for j in range(theta.size):
+        tp, h = problem.stepped(theta, j)
+        pv, extra = problem.model(problem.full_theta(tp))
+        x1, x2 = np.zeros(problem.n), np.zeros(problem.n)
+        eta = problem.eta + extra.get("eta_offset", 0.0)
+        problem._shoot_windows(eta, problem.gains(pv), np.arange(problem.n_windows), x0, pv,
+                               x1, x2)
+        J[:, j] = (problem.output_error(x1, pv) - r) / h
+    a11, a12, a22, det = normal(problem, d1, d2)
+    win = np.repeat(np.arange(problem.n_windows), np.diff(problem.starts))
+    out = J.copy()
+    for j in range(J.shape[1]):
+        g1, g2 = window_sums(problem, d1 * J[:, j]), window_sums(problem, d2 * J[:, j])
+        c1 = (a22 * g1 - a12 * g2) / det
+        c2 = (a11 * g2 - a12 * g1) / det
+        out[:, j] -= c1[win] * d1 + c2[win] * d2
+    return out
+
+
 def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20):
     """The array version of :meth:`Problem.starts_for` (every window at once)."""
     x0 = x0.copy()
@@ -30,7 +65,7 @@ def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20):
     every = np.arange(problem.n_windows)
     problem._shoot_windows(eta, gains, every, x0, pv, out[0], out[1])
     r = problem.output_error(out[0], pv)
-    cost = problem._window_sums(r * r)
+    cost = window_sums(problem, r * r)
     d1, d2 = np.zeros(problem.n), np.zeros(problem.n)
     active = np.ones(problem.n_windows, dtype=bool)
     lam = np.ones(problem.n_windows)
@@ -48,15 +83,15 @@ def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20):
         if windows.size == 0:
             break
         derivatives(windows)
-        a11, a12, a22, det = problem._normal(d1, d2)
-        g1, g2 = problem._window_sums(d1 * r), problem._window_sums(d2 * r)
+        a11, a12, a22, det = normal(problem, d1, d2)
+        g1, g2 = window_sums(problem, d1 * r), window_sums(problem, d2 * r)
         step = np.column_stack([-(a22 * g1 - a12 * g2) / det, -(a11 * g2 - a12 * g1) / det])
         step[~active] = 0.0
         trial = x0 + lam[:, None] * step
         np.maximum(trial[:, 1], 0.0, out=trial[:, 1])
         problem._shoot_windows(eta, gains, windows, trial, pv, out[1], scratch)
         r_try = problem.output_error(out[1], pv)
-        cost_try = problem._window_sums(r_try * r_try)
+        cost_try = window_sums(problem, r_try * r_try)
         take = active & (cost_try <= cost)
         x0[take] = trial[take]
         cost[take] = cost_try[take]
@@ -81,10 +116,13 @@ def trials():
                                                   effects=effects_from_mapping(effects)))
 
 
+def _theta(problem: Problem, values: dict[str, float]):
+    return np.array([values.get(problem.specs[i].name, problem.specs[i].start)
+                     for i in problem.free]) * 1.02
+
+
 def _inputs(problem: Problem, values: dict[str, float]):
-    theta = np.array([values.get(problem.specs[i].name, problem.specs[i].start)
-                      for i in problem.free])
-    pv, extra = problem.model(problem.full_theta(theta * 1.02))
+    pv, extra = problem.model(problem.full_theta(_theta(problem, values)))
     return pv, problem.eta + extra.get("eta_offset", 0.0), problem.gains(pv)
 
 
@@ -119,6 +157,11 @@ def test_compiled_window_starts_are_the_array_versions_bits(trials, case, thread
     r_start = reference_starts(problem, pv, eta, gains, x0, 0)[1]
     assert float(got[1] @ got[1]) < 0.5 * float(r_start @ r_start)
     assert not np.array_equal(got[0], x0)
+    # the Jacobian at the solved starts, its columns shot and the starts projected out
+    theta = _theta(problem, values)
+    jac = problem.jacobian(theta, *got)
+    np.testing.assert_array_equal(jac, reference_jacobian(problem, theta, *got))
+    assert np.all(np.abs(jac).max(axis=0) > 0)       # every parameter moves the residual
 
 
 def test_the_fused_shot_is_the_output_error_of_the_simulation(trials):

@@ -41,7 +41,8 @@ from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from .candidates import Candidate, ParamSpec
 from .data import REST_BAND, Trial, clean_mask, rest_start
-from .simulate import retention_charge, shoot_errors, shoot_windows, solve_window_starts
+from .simulate import (project_out_starts, retention_charge, shoot_errors, shoot_quotients,
+                       shoot_windows, solve_window_starts)
 from .threads import run_split, with_one_blas_thread
 
 
@@ -265,6 +266,7 @@ class Problem:
         self._out2 = np.zeros(n)
         self._every = np.arange(self.n_windows)
         self._charge_cache: dict[float, np.ndarray] = {}
+        self._gains_cache: tuple[bytes, np.ndarray] | None = None
 
     @property
     def n_windows(self) -> int:
@@ -309,7 +311,19 @@ class Problem:
         return pv, extra
 
     def gains(self, pv: np.ndarray) -> np.ndarray:
-        """Force multiplier of the active actuator at every sample (spread x retention)."""
+        """Force multiplier of the active actuator at every sample (spread x retention), (n,),
+        read-only.  The last one is kept: most evaluations change no gain."""
+        key = pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS].tobytes() + pv[
+            [L.P_RET_RATE, L.P_RET_RECOVERY]].tobytes()
+        last = self._gains_cache
+        if last is not None and last[0] == key:
+            return last[1]
+        g = self._gains(pv)
+        g.flags.writeable = False
+        self._gains_cache = (key, g)
+        return g
+
+    def _gains(self, pv: np.ndarray) -> np.ndarray:
         g = pv[L.P_GAINS + self.pad]
         rate = pv[L.P_RET_RATE]
         if rate > 0.0:
@@ -421,15 +435,6 @@ class Problem:
         self._split(lambda part: shoot_windows(*self._inputs(eta, gains), part, x0, pv, out1,
                                                out2), windows)
 
-    def _window_sums(self, v: np.ndarray) -> np.ndarray:
-        return np.add.reduceat(v, self.starts[:-1])
-
-    def _normal(self, d1: np.ndarray, d2: np.ndarray):
-        a11, a12, a22 = (self._window_sums(d1 * d1), self._window_sums(d1 * d2),
-                         self._window_sums(d2 * d2))
-        det = a11 * a22 - a12 * a12
-        return a11, a12, a22, np.where(np.abs(det) > 1e-30, det, np.inf)
-
     def solve_starts(self, full: np.ndarray, x0: np.ndarray, iterations: int = 12
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Best window starts for the shared parameters ``full`` (Gauss-Newton, each window on
@@ -467,34 +472,38 @@ class Problem:
         return x0, r, d1, d2
 
     def _project(self, J: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
-        """Remove from each column of J (n, g) the part that the window starts can explain."""
-        a11, a12, a22, det = self._normal(d1, d2)
-        win = np.repeat(np.arange(self.n_windows), np.diff(self.starts))
-        out = J.copy()
-        for j in range(J.shape[1]):
-            g1, g2 = self._window_sums(d1 * J[:, j]), self._window_sums(d2 * J[:, j])
-            c1 = (a22 * g1 - a12 * g2) / det
-            c2 = (a11 * g2 - a12 * g1) / det
-            out[:, j] -= c1[win] * d1 + c2[win] * d2
+        """Remove from each column of J (n, g) the part that the window starts can explain
+        (:func:`~.simulate.project_out_starts`, over the threads)."""
+        out = np.empty_like(J)
+        self._split(lambda part: project_out_starts(J, d1, d2, self.starts, part, out),
+                    self._every)
         return out
+
+    def stepped(self, theta: np.ndarray, j: int) -> tuple[np.ndarray, float]:
+        """(theta with its j-th free parameter stepped by h, h): the Jacobian's forward
+        difference, 1e-6 of the value or of its typical scale, backwards at the upper bound."""
+        p = self.specs[self.free[j]]
+        h = 1e-6 * max(abs(theta[j]), p.scale)
+        if theta[j] + h > p.upper:
+            h = -h
+        tp = theta.copy()
+        tp[j] += h
+        return tp, h
 
     def jacobian(self, theta: np.ndarray, x0: np.ndarray, r: np.ndarray, d1: np.ndarray,
                  d2: np.ndarray) -> np.ndarray:
         """(n, g) derivative of the residual [rad] with respect to the free parameters at
         ``theta`` (g,), with the window starts x0 (w, 2) projected out (finite differences
         with the starts held; ``r``, ``d1``, ``d2`` as returned by :meth:`solve_starts`)."""
-        hi = np.array([self.specs[i].upper for i in self.free])
-        scale = np.array([self.specs[i].scale for i in self.free])
         J = np.empty((self.n, theta.size))
         for j in range(theta.size):
-            h = 1e-6 * max(abs(theta[j]), scale[j])
-            if theta[j] + h > hi[j]:
-                h = -h
-            tp = theta.copy()
-            tp[j] += h
+            tp, h = self.stepped(theta, j)
             pv, extra = self.model(self.full_theta(tp))
-            J[:, j] = (self._shoot(pv, self.eta + extra.get("eta_offset", 0.0),
-                                   self.gains(pv), x0) - r) / h
+            inputs = self._inputs(self.eta + extra.get("eta_offset", 0.0), self.gains(pv))
+            col = J[:, j]
+            self._split(lambda part: shoot_quotients(
+                *inputs, part, x0, pv, self.y, self._quantum_or_nan, self.ok, r, h,
+                self._out1, self._out2, col), self._every)
         return self._project(J, d1, d2)
 
     # -- fitting ------------------------------------------------------------------------------

@@ -157,6 +157,19 @@ def window_dot(u: np.ndarray, v: np.ndarray, a: int, b: int) -> float:
 
 
 @jit_inline
+def _normal(d1: np.ndarray, d2: np.ndarray, a: int, b: int) -> tuple[float, float, float, float]:
+    """The normal matrix (a11, a12, a22) of one window's start derivatives d1, d2 (samples
+    a..b-1) and its determinant (inf when |det| <= 1e-30, so that the step is 0)."""
+    a11 = window_dot(d1, d1, a, b)
+    a12 = window_dot(d1, d2, a, b)
+    a22 = window_dot(d2, d2, a, b)
+    det = a11 * a22 - a12 * a12
+    if not abs(det) > 1e-30:
+        det = math.inf
+    return a11, a12, a22, det
+
+
+@jit_inline
 def _window_errors(x: np.ndarray, a: int, b: int, y: np.ndarray, quantum: float,
                    ok: np.ndarray, pv: np.ndarray, out: np.ndarray) -> None:
     for k in range(a, b):
@@ -176,6 +189,46 @@ def shoot_errors(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarra
         b = starts[w + 1]
         shoot_window(t, q, eta, phi_a, on_time, gain, a, b, x0[w, 0], x0[w, 1], pv, out1, out2)
         _window_errors(out1, a, b, y, quantum, ok, pv, err)
+
+
+@jit_kernel
+def shoot_quotients(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np.ndarray,
+                    on_time: np.ndarray, gain: np.ndarray, starts: np.ndarray,
+                    windows: np.ndarray, x0: np.ndarray, pv: np.ndarray, y: np.ndarray,
+                    quantum: float, ok: np.ndarray, r: np.ndarray, h: float, out1: np.ndarray,
+                    out2: np.ndarray, col: np.ndarray) -> None:
+    """:func:`shoot_errors` of a parameter vector pv stepped by h from the one whose output
+    error is r (n,): the forward-difference quotient (error - r) / h into col (n,; a column
+    of the Jacobian, any stride) over the listed windows."""
+    for i in range(windows.shape[0]):
+        w = windows[i]
+        a = starts[w]
+        b = starts[w + 1]
+        shoot_window(t, q, eta, phi_a, on_time, gain, a, b, x0[w, 0], x0[w, 1], pv, out1, out2)
+        for k in range(a, b):
+            col[k] = (sample_error(out1[k], k, y, quantum, ok, pv) - r[k]) / h
+
+
+@jit_kernel
+def project_out_starts(J: np.ndarray, d1: np.ndarray, d2: np.ndarray, starts: np.ndarray,
+                       windows: np.ndarray, out: np.ndarray) -> None:
+    """Each column of J (n, g) less its least-squares fit by each listed window's two start
+    derivatives d1, d2 (n,), into out (n, g): the part of a parameter's effect that the
+    window starts cannot take up (variable projection).  Sums in numpy's order
+    (:func:`window_dot`), so the bits of the same projection written with numpy arrays."""
+    for i in range(windows.shape[0]):
+        w = windows[i]
+        a = starts[w]
+        b = starts[w + 1]
+        a11, a12, a22, det = _normal(d1, d2, a, b)
+        for j in range(J.shape[1]):
+            col = J[:, j]
+            g1 = window_dot(d1, col, a, b)
+            g2 = window_dot(d2, col, a, b)
+            c1 = (a22 * g1 - a12 * g2) / det
+            c2 = (a11 * g2 - a12 * g1) / det
+            for k in range(a, b):
+                out[k, j] = col[k] - (c1 * d1[k] + c2 * d2[k])
 
 
 #: Forward-difference step of the window starts' derivatives [rad, rad/s].
@@ -233,12 +286,7 @@ def solve_window_starts(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np
                 _start_derivatives(t, q, eta, phi_a, on_time, gain, a, b, s1, s2, pv, y,
                                    quantum, ok, r, d1, d2, out1, out2)
                 stale = False
-            a11 = window_dot(d1, d1, a, b)
-            a12 = window_dot(d1, d2, a, b)
-            a22 = window_dot(d2, d2, a, b)
-            det = a11 * a22 - a12 * a12
-            if not abs(det) > 1e-30:
-                det = math.inf
+            a11, a12, a22, det = _normal(d1, d2, a, b)
             g1 = window_dot(d1, r, a, b)
             g2 = window_dot(d2, r, a, b)
             step1 = -(a22 * g1 - a12 * g2) / det
