@@ -395,11 +395,12 @@ def _retention(rate: float) -> dict:
 @pytest.mark.parametrize("effect, excluded, axes, apart", [
     ({"rise_lag": {"enabled": True, "time_constant": {"value": 0.04, "unit": "s"}}},
      "rise_lag", ("speed",), 1e6),
-    (_retention(0.2), "charge_retention", ("hv_time", "time"), 1e6),
-    # weaker retention: speed is closer behind HV time (10^2.8 to 10^6.3 times less likely
-    # over seeds 11-13, bench_ident_effects.py --outside-only), so only an order of
-    # magnitude is asked; before the refit beside the HV-time loss a rise lag was named here
-    (_retention(0.05), "charge_retention", ("hv_time", "time"), 10.0),
+    # charge retention left out, on the same protocol (0.2/s: the drift along HV time, 10^6
+    # apart; 0.05/s, where speed is closer behind, 10^2.8 to 10^6.3 over seeds 11-13, one
+    # order asked) passes too, but takes about 115 s of a worker: with both, a clean clone's
+    # suite took 549 s (566 s with setup, ten minutes the limit).  bench_ident_effects.py
+    # --outside-only prints their verdicts; retention of 0.2/s left out is tested on 3 x 34 s
+    # below
 ])
 def test_look_alike_losses_outside_the_library_drift_along_their_own_axis(effect, excluded,
                                                                          axes, apart):
