@@ -10,6 +10,9 @@ identification makes downstream follows these numbers, so they must not move in 
 bit: they are compared with ``assert_array_equal``, not a tolerance.
 """
 import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -55,8 +58,10 @@ def reference_jacobian(problem: Problem, theta, x0, r, d1, d2):
     return out
 
 
-def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20):
-    """The array version of :meth:`Problem.starts_for` (every window at once)."""
+def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20, paths=None):
+    """The array version of :meth:`Problem.starts_for` (every window at once).  ``paths``
+    (a dict), when given, counts the steps refused and the trial speeds clamped at 0."""
+    paths = {} if paths is None else paths
     x0 = x0.copy()
     h1, h2 = 1e-6, 1e-6
     lengths = np.diff(problem.starts)
@@ -88,11 +93,13 @@ def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20):
         step = np.column_stack([-(a22 * g1 - a12 * g2) / det, -(a11 * g2 - a12 * g1) / det])
         step[~active] = 0.0
         trial = x0 + lam[:, None] * step
+        paths["clamped"] = paths.get("clamped", 0) + int(np.sum(trial[windows, 1] < 0.0))
         np.maximum(trial[:, 1], 0.0, out=trial[:, 1])
         problem._shoot_windows(eta, gains, windows, trial, pv, out[1], scratch)
         r_try = problem.output_error(out[1], pv)
         cost_try = window_sums(problem, r_try * r_try)
         take = active & (cost_try <= cost)
+        paths["refused"] = paths.get("refused", 0) + int(np.sum(active & ~take))
         x0[take] = trial[take]
         cost[take] = cost_try[take]
         sel = np.repeat(take, lengths)
@@ -104,6 +111,13 @@ def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20):
     if stale.any():
         derivatives(np.flatnonzero(stale))
     return x0, r, d1, d2
+
+
+def assert_same_bits(a, b):
+    """a and b hold the same float64 bits (-0.0 is not 0.0 here, nor one NaN another)."""
+    a, b = np.ascontiguousarray(a, dtype=float), np.ascontiguousarray(b, dtype=float)
+    assert a.shape == b.shape
+    np.testing.assert_array_equal(a.view(np.uint64), b.view(np.uint64))
 
 
 @pytest.fixture(scope="module")
@@ -134,8 +148,8 @@ CASES = {
     # an eccentric sensor (cos, sin in every sample) and gains that fall with the HV time
     "eccentric sensor, retention": (dict(), ("angle_eccentricity", "charge_retention"),
                                     {"E": 0.01, "F": -0.004, "rate": 0.02, "recovery": 30.0}),
-    # samples outside [1 s, 6 s) do not count (ok False): windows with none and with some
-    "samples left out": (dict(keep=(1.0, 6.0)), (), {}),
+    # samples outside [1.5 s, 6 s) do not count (ok False): windows with none and with some
+    "samples left out": (dict(keep=(1.5, 6.0)), (), {}),
 }
 
 
@@ -147,12 +161,22 @@ def test_compiled_window_starts_are_the_array_versions_bits(trials, case, thread
                       **kwargs)
     pv, eta, gains = _inputs(problem, values)
     x0 = problem.initial_starts()
-    x0[::3, 1] += 0.5                    # some windows start far off and need many steps
+    x0[::3, 1] += 0.5                    # some windows start far off and need many steps,
+    x0[1::3, 1] = 0.02                   # some near rest, where a step can go below 0
+    # a start speed of -0.0: where no sample counts (samples left out) the step is -0.0 too,
+    # and the clamp must give +0.0 as np.maximum does
+    x0[0, 1] = -0.0
+    paths: dict[str, int] = {}
     for iterations in (0, 3, 20):
         got = problem.starts_for(pv, eta, gains, x0, iterations)
-        want = reference_starts(problem, pv, eta, gains, x0, iterations)
+        want = reference_starts(problem, pv, eta, gains, x0, iterations, paths)
         for a, b in zip(got, want):
-            np.testing.assert_array_equal(a, b)
+            assert_same_bits(a, b)
+    # the rule's side paths ran: a step refused (its derivatives kept) and a trial speed
+    # clamped at 0 (not where samples are left out: the windows near rest count none there;
+    # the -0.0 start takes the clamp's other side)
+    assert paths["refused"] > 0
+    assert paths["clamped"] > 0 or case == "samples left out"
     # the solve moved the starts and cut the error (the comparison is not of two no-ops)
     r_start = reference_starts(problem, pv, eta, gains, x0, 0)[1]
     assert float(got[1] @ got[1]) < 0.5 * float(r_start @ r_start)
@@ -160,7 +184,7 @@ def test_compiled_window_starts_are_the_array_versions_bits(trials, case, thread
     # the Jacobian at the solved starts, its columns shot and the starts projected out
     theta = _theta(problem, values)
     jac = problem.jacobian(theta, *got)
-    np.testing.assert_array_equal(jac, reference_jacobian(problem, theta, *got))
+    assert_same_bits(jac, reference_jacobian(problem, theta, *got))
     assert np.all(np.abs(jac).max(axis=0) > 0)       # every parameter moves the residual
 
 
@@ -171,8 +195,8 @@ def test_the_fused_shot_is_the_output_error_of_the_simulation(trials):
     err = problem._shoot(pv, eta, gains, x0)
     x1, x2 = np.zeros(problem.n), np.zeros(problem.n)
     problem._shoot_windows(eta, gains, np.arange(problem.n_windows), x0, pv, x1, x2)
-    np.testing.assert_array_equal(err, problem.output_error(x1, pv))
-    np.testing.assert_array_equal(problem._out1, x1)
+    assert_same_bits(err, problem.output_error(x1, pv))
+    assert_same_bits(problem._out1, x1)
 
 
 @pytest.mark.parametrize("lengths", [[1], [2, 7, 8, 9], [127, 128, 129], [255, 256, 257, 300],
@@ -183,11 +207,34 @@ def test_window_dot_sums_in_numpys_order(lengths):
     # magnitudes over 12 decades, so another order of the sum would round differently
     u = rng.standard_normal(starts[-1]) * 10.0 ** rng.uniform(-8, 4, starts[-1])
     v = rng.standard_normal(starts[-1])
+    u[0], v[0] = -0.0, 1.0               # a window of one sample keeps -0.0, as numpy does
     want = np.add.reduceat(u * v, starts[:-1])
     got = np.array([window_dot(u, v, starts[w], starts[w + 1]) for w in range(len(lengths))])
-    np.testing.assert_array_equal(got, want)
+    assert_same_bits(got, want)
     # and the order matters: a running sum from the first product rounds differently
     if max(lengths) > 128:
         running = np.array([np.cumsum(u[a:b] * v[a:b])[-1]
                             for a, b in zip(starts[:-1], starts[1:])])
         assert not np.array_equal(running, want)
+
+
+def test_the_recursive_sum_loads_from_numbas_cache(tmp_path):
+    # numba/numba#6061: a recursive function cached with cache=True crashed when it was
+    # loaded from the cache.  One process compiles the sum into a fresh cache, a second loads
+    # it from there and must get numpy's bits for a sum long enough to recurse
+    pytest.importorskip("numba")
+    code = (
+        "import numpy as np\n"
+        "from hasel_wheel_mpc.ident.simulate import _pairwise_dot\n"
+        "u = np.random.default_rng(0).standard_normal(5000)\n"
+        "s = _pairwise_dot(u, u, 0, u.size)\n"
+        "assert s == np.add.reduce(u * u), (s, np.add.reduce(u * u))\n"
+        "st = _pairwise_dot.stats\n"
+        "print(sum(st.cache_hits.values()), sum(st.cache_misses.values()))\n")
+    env = dict(os.environ, HASEL_WHEEL_JIT_CACHE=str(tmp_path))
+    runs = [subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           text=True, timeout=300) for _ in range(2)]
+    for run in runs:
+        assert run.returncode == 0, run.stderr
+    assert runs[0].stdout.split() == ["0", "1"]          # compiled into the fresh cache
+    assert runs[1].stdout.split() == ["1", "0"]          # and loaded from it

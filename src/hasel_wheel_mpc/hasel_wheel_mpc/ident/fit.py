@@ -21,7 +21,8 @@ own (xi1, xi2), fitted along with the parameters (multiple shooting).  The resid
 simulated angle as the model's sensor reads it (:func:`~hasel_wheel_sim.model.angle_readings`;
 the angle itself unless an eccentricity is fitted) minus the recorded angle [rad] at every
 sample, with the measured switching (:func:`~.simulate.shoot_windows`).  The window starts are solved for inside every evaluation
-(variable projection: Gauss-Newton on all windows at once), so scipy's trust-region least
+(variable projection: safeguarded Gauss-Newton on each window, in compiled code,
+:func:`~.simulate.solve_window_starts`), so scipy's trust-region least
 squares sees only the shared parameters, with the window starts projected out of its
 Jacobian (Kaufman).  It runs to convergence (:data:`FTOL`), not to an iteration limit.
 The same projected Jacobian gives the covariance with the starts marginalised.
@@ -463,7 +464,7 @@ class Problem:
         at once (tested); the Python work between the simulations, which had left the second
         core idle for about half of a fit, is gone.
         """
-        x0 = np.array(x0, dtype=float)         # a C-ordered copy, solved in place
+        x0 = np.array(x0, dtype=float, order="C")   # a copy, solved in place
         r, d1, d2 = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         scratch = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         self._split(lambda part: solve_window_starts(

@@ -111,7 +111,11 @@ def sample_error(x1: float, k: int, y: np.ndarray, quantum: float, ok: np.ndarra
 def _pairwise_dot(u: np.ndarray, v: np.ndarray, a: int, n: int) -> float:
     """Sum of u[k] v[k] over k = a..a+n-1, in the order of numpy's pairwise summation (blocks
     of up to 128 in eight running sums, halves above that), so the same bits as numpy's sum
-    of the products."""
+    of the products.
+
+    Recursive, and cached by numba: numba/numba#6061 reports a recursive function that
+    crashed when loaded from the cache.  This one loads (numba 0.68; a test compiles it in
+    one process and calls it from the cache in another)."""
     if n < 8:
         res = 0.0
         for i in range(a, a + n):
@@ -152,7 +156,9 @@ def _pairwise_dot(u: np.ndarray, v: np.ndarray, a: int, n: int) -> float:
 def window_dot(u: np.ndarray, v: np.ndarray, a: int, b: int) -> float:
     """Sum of u[k] v[k] over one window, samples a..b-1 (b > a): bit for bit what
     ``np.add.reduceat(u * v, starts)`` gives for it (the first product, plus numpy's pairwise
-    sum of the rest)."""
+    sum of the rest; a window of one sample is its product, unchanged, -0.0 included)."""
+    if b - a == 1:
+        return u[a] * v[a]
     return u[a] * v[a] + _pairwise_dot(u, v, a + 1, b - a - 1)
 
 
@@ -293,8 +299,8 @@ def solve_window_starts(t: np.ndarray, q: np.ndarray, eta: np.ndarray, phi_a: np
             step2 = -(a11 * g2 - a12 * g1) / det
             t1 = s1 + lam * step1
             t2 = s2 + lam * step2
-            if not (t2 >= 0.0 or t2 != t2):        # the wheel rolls forwards (or rests)
-                t2 = 0.0
+            if not (t2 > 0.0 or t2 != t2):         # the wheel rolls forwards (or rests);
+                t2 = 0.0                            # -0.0 too becomes 0.0, as in np.maximum
             shoot_window(t, q, eta, phi_a, on_time, gain, a, b, t1, t2, pv, out1, out2)
             _window_errors(out1, a, b, y, quantum, ok, pv, trial)
             cost_try = window_dot(trial, trial, a, b)
