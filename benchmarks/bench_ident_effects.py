@@ -195,7 +195,7 @@ def run_two_and_outside() -> None:
         dt = time.perf_counter() - t0
         d = res.diagnostics_after
         sigs = "; ".join(s.text for s in d.signatures) or "none"
-        # what test_ident_effects.py asks of this data (the same conditions)
+        # what test_ident_effects.py asked of this data before the case moved here
         if lib is C.LIBRARY:
             ok = (res.chosen == ("viscous_drag",) and not d.signatures
                   and d.correlated_share < RES.CORRELATED_SHARE / 3)
@@ -239,7 +239,7 @@ def run_sensor() -> None:
                  for e in r if "not the same in every trial" in e.reason]
         sigs = " | ".join(sig.text.split("; refitted to it")[0]
                           for sig in res.diagnostics_after.signatures)
-        # what test_ident_effects.py asks of the 5 mrad case (the same conditions): the
+        # what test_ident_effects.py asked of the 5 mrad case before it moved here: the
         # off-centre mass refused, its torque growing with the speed (J e xi2^2: k near 2),
         # and the structure reported once per wheel turn
         com = [e for r in res.rounds for e in r if e.effects == ("com_offset",)]
@@ -338,8 +338,8 @@ def run_outside_library() -> None:
 
 
 #: the drift a look-alike left out of the library should leave: its own axis, and how many
-#: times less likely the other loss's axis must be (test_ident_effects.py asks the same of
-#: seed 11 on 5 x 60 s; weak retention: only an order of
+#: times less likely the other loss's axis must be (test_ident_effects.py asked the same of
+#: seed 11 on 5 x 60 s before these runs moved here; weak retention: only an order of
 #: magnitude, since speed is closer behind HV time there)
 LOOK_ALIKE_AXES = {"rise_lag": (("speed",), ("time", "hv_time")),
                    "charge_retention": (("hv_time", "time"), ("speed",))}
