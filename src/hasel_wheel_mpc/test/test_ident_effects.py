@@ -371,6 +371,14 @@ def test_a_rise_lag_outside_the_library_on_short_trials_leaves_a_drift_along_spe
     drift = [s for s in res.diagnostics_after.signatures if SEL.drift_signature(s)]
     assert [s.axis for s in drift] == ["speed"]
     assert res.diagnostics_after.trend.p_value < 1e-20
+    # and nothing beside it: the force factors per actuator are tested beside the device
+    # that takes up the most of the drift, here the switch-on lag (near the plant's 40 ms).
+    # Beside the HV-time loss they took up structure the lag left, and a signature along
+    # the actuator index was reported too (until a55e557)
+    devices = drift[0].devices
+    assert devices["on_lag"]["value"] == pytest.approx(0.04, rel=0.1)
+    assert devices["on_lag"]["sim_rmse_rad_s"] < 0.9 * devices["hv_loss"]["sim_rmse_rad_s"]
+    assert [s.axis for s in res.diagnostics_after.signatures] == ["speed"]
 
 
 def _refused_leaving_a_drift(res: SEL.Identification, cid: str) -> tuple[str, RES.Signature]:
