@@ -22,7 +22,16 @@ from hasel_wheel_mpc.ident import synthetic as S
 from hasel_wheel_mpc.ident.fit import Problem
 from hasel_wheel_mpc.ident.simulate import window_dot
 from hasel_wheel_sim.effects import effects_from_mapping
+from hasel_wheel_sim.model import angle_readings
 from hasel_wheel_sim.plant import PlantConfig
+
+
+def reference_output_error(problem: Problem, x1, pv):
+    """The array version of the output error (:func:`~hasel_wheel_mpc.ident.simulate.sample_error`)."""
+    x1 = angle_readings(x1, pv)
+    if problem.quantum is None:
+        return np.where(problem.ok, x1 - problem.y, 0.0)
+    return np.where(problem.ok, x1 - np.clip(x1, problem.y, problem.y + problem.quantum), 0.0)
 
 
 def window_sums(problem: Problem, v):
@@ -46,7 +55,7 @@ def reference_jacobian(problem: Problem, theta, x0, r, d1, d2):
         eta = problem.eta + extra.get("eta_offset", 0.0)
         problem._shoot_windows(eta, problem.gains(pv), np.arange(problem.n_windows), x0, pv,
                                x1, x2)
-        J[:, j] = (problem.output_error(x1, pv) - r) / h
+        J[:, j] = (reference_output_error(problem, x1, pv) - r) / h
     a11, a12, a22, det = normal(problem, d1, d2)
     win = np.repeat(np.arange(problem.n_windows), np.diff(problem.starts))
     out = J.copy()
@@ -69,7 +78,7 @@ def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20, paths=
     scratch = np.zeros(problem.n)
     every = np.arange(problem.n_windows)
     problem._shoot_windows(eta, gains, every, x0, pv, out[0], out[1])
-    r = problem.output_error(out[0], pv)
+    r = reference_output_error(problem, out[0], pv)
     cost = window_sums(problem, r * r)
     d1, d2 = np.zeros(problem.n), np.zeros(problem.n)
     active = np.ones(problem.n_windows, dtype=bool)
@@ -80,7 +89,7 @@ def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20, paths=
         sel = np.repeat(np.isin(every, windows), lengths)
         for d, e, h in ((d1, (h1, 0.0), h1), (d2, (0.0, h2), h2)):
             problem._shoot_windows(eta, gains, windows, x0 + e, pv, out[1], scratch)
-            d[sel] = (problem.output_error(out[1], pv)[sel] - r[sel]) / h
+            d[sel] = (reference_output_error(problem, out[1], pv)[sel] - r[sel]) / h
         stale[windows] = False
 
     for _ in range(iterations):
@@ -96,7 +105,7 @@ def reference_starts(problem: Problem, pv, eta, gains, x0, iterations=20, paths=
         paths["clamped"] = paths.get("clamped", 0) + int(np.sum(trial[windows, 1] < 0.0))
         np.maximum(trial[:, 1], 0.0, out=trial[:, 1])
         problem._shoot_windows(eta, gains, windows, trial, pv, out[1], scratch)
-        r_try = problem.output_error(out[1], pv)
+        r_try = reference_output_error(problem, out[1], pv)
         cost_try = window_sums(problem, r_try * r_try)
         take = active & (cost_try <= cost)
         paths["refused"] = paths.get("refused", 0) + int(np.sum(active & ~take))
@@ -189,14 +198,17 @@ def test_compiled_window_starts_are_the_array_versions_bits(trials, case, thread
 
 
 def test_the_fused_shot_is_the_output_error_of_the_simulation(trials):
+    # and the residual of a packed vector is that shot
     problem = Problem(trials, candidates=C.library(["angle_eccentricity"]), threads=2)
     pv, eta, gains = _inputs(problem, {"E": 0.01, "F": 0.003})
     x0 = problem.initial_starts()
     err = problem._shoot(pv, eta, gains, x0)
     x1, x2 = np.zeros(problem.n), np.zeros(problem.n)
     problem._shoot_windows(eta, gains, np.arange(problem.n_windows), x0, pv, x1, x2)
-    assert_same_bits(err, problem.output_error(x1, pv))
+    assert_same_bits(err, reference_output_error(problem, x1, pv))
     assert_same_bits(problem._out1, x1)
+    z = np.concatenate([_theta(problem, {"E": 0.01, "F": 0.003}), x0.ravel()])
+    assert_same_bits(problem.residual(z), err)
 
 
 @pytest.mark.parametrize("lengths", [[1], [2, 7, 8, 9], [127, 128, 129], [255, 256, 257, 300],

@@ -351,29 +351,16 @@ class Problem:
         return self._out1, self._out2
 
     def residual(self, z: np.ndarray) -> np.ndarray:
-        x1, _ = self.simulate(z)
-        return self.output_error(x1, self.model(self.full_theta(z[:len(self.free)]))[0])
+        """(n,) the output error [rad] (:meth:`_shoot`) for the packed vector z."""
+        g = len(self.free)
+        pv, extra = self.model(self.full_theta(z[:g]))
+        return self._shoot(pv, self.eta + extra.get("eta_offset", 0.0), self.gains(pv),
+                           z[g:].reshape(-1, 2))
 
     def readings(self, z: np.ndarray, x1: np.ndarray) -> np.ndarray:
         """(n,) the angle sensor's readings [rad] of the wheel angles x1 (n,) [rad] under the
         model of the packed vector z (x1 itself unless an eccentricity is fitted)."""
         return angle_readings(x1, self.model(self.full_theta(z[:len(self.free)]))[0])
-
-    def output_error(self, x1: np.ndarray, pv: np.ndarray) -> np.ndarray:
-        """(n,) simulated minus measured angle [rad], 0 at rejected samples.
-
-        The simulated wheel angles x1 (n,) are first turned into what the sensor of the
-        model ``pv`` reads (:func:`~hasel_wheel_sim.model.angle_readings`).
-
-        When the angles are encoder counts (``self.quantum`` [rad], found in the data), a
-        reading y says only that the angle lies in [y, y + quantum): the error is the
-        distance from that interval (0 inside).  Taking y itself as the angle would add the
-        encoder's sawtooth, which at 300 Hz aliases into slow errors that correlate with
-        speed and bias the force law (by ~5 % in its peak)."""
-        x1 = angle_readings(x1, pv)
-        if self.quantum is None:
-            return np.where(self.ok, x1 - self.y, 0.0)
-        return np.where(self.ok, x1 - np.clip(x1, self.y, self.y + self.quantum), 0.0)
 
     def noise(self, r: np.ndarray, g: int) -> tuple[float, float]:
         """(s^2 [rad^2], inflation) of the residual r (n,) of a fit with g shared parameters.
@@ -402,8 +389,17 @@ class Problem:
 
     def _shoot(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray,
                x0: np.ndarray) -> np.ndarray:
-        """(n,) the output error [rad] (:meth:`output_error`) of every window shot from the
-        starts x0 (w, 2); the wheel's (xi1, xi2) are left in ``self._out1``, ``self._out2``."""
+        """(n,) the output error [rad] of every window shot from the starts x0 (w, 2): simulated
+        minus measured angle, 0 at rejected samples (:func:`~.simulate.sample_error`); the
+        wheel's (xi1, xi2) are left in ``self._out1``, ``self._out2``.
+
+        The simulated wheel angles are first turned into what the sensor of the model ``pv``
+        reads (:func:`~hasel_wheel_sim.model.angle_reading`).  When the angles are encoder
+        counts (``self.quantum`` [rad], found in the data), a reading y says only that the
+        angle lies in [y, y + quantum): the error is the distance from that interval (0
+        inside).  Taking y itself as the angle would add the encoder's sawtooth, which at
+        300 Hz aliases into slow errors that correlate with speed and bias the force law (by
+        ~5 % in its peak)."""
         err = np.empty(self.n)
         self._split(lambda part: shoot_errors(*self._inputs(eta, gains), part, x0, pv, self.y,
                                               self._quantum_or_nan, self.ok, self._out1,

@@ -94,7 +94,8 @@ def sample_error(x1: float, k: int, y: np.ndarray, quantum: float, ok: np.ndarra
     [rad]: what the model's sensor reads (:func:`~hasel_wheel_sim.model.angle_reading`)
     minus y[k], or with encoder counts (``quantum`` [rad], NaN when the angles are not
     counts) its distance from the count's interval [y[k], y[k] + quantum); 0 where ok[k] is
-    False.  The same bits as :meth:`~.fit.Problem.output_error` (numpy's clip, NaN kept)."""
+    False.  The same bits as the numpy version it replaced (numpy's clip, NaN kept; kept as
+    the reference in test_ident_window_starts.py)."""
     if not ok[k]:
         return 0.0
     m = angle_reading(x1, pv)
