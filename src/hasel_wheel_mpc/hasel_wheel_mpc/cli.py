@@ -110,12 +110,13 @@ def cmd_demo(args: argparse.Namespace) -> int:
                                          "plant.yaml": Path(args.plant).read_text(),
                                          "hold_scale": repr(args.hold_scale),
                                          "wheels": str(args.wheels),
+                                         "same_wheel": str(args.same_wheel).lower(),
                                          "controller_overrides": repr(dict(args.set or []))})
     variants = VARIANTS if args.compare else VARIANTS[:1]
     t0 = time.perf_counter()
     try:
         results = run_variants(plant_cfg, args.hold_scale, variants, rec, args.wheels,
-                               dict(args.set or []))
+                               dict(args.set or []), args.same_wheel)
     finally:
         rec.close()
     wall = time.perf_counter() - t0
@@ -252,6 +253,10 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--wheels", type=int, default=1,
                    help="wheels run in lockstep, wheel i on the plant seed + i, each recorded "
                         "under /wheel<i> (default 1)")
+    c.add_argument("--same-wheel", action="store_true",
+                   help="with --wheels N: N runs of one wheel (its actuator gains drawn once, "
+                        "from the plant seed, as `trials` records one wheel); each run still "
+                        "draws its noise from seed + i")
     c.add_argument("--no-compare", dest="compare", action="store_false",
                    help="skip the comparison runs (no estimator, paper estimator, finite difference)")
     c.add_argument("--set", action="append", type=bag_cli.override_arg,

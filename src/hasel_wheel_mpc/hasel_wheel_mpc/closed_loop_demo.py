@@ -7,13 +7,14 @@ metrics per reference next to the paper's and writes PNG plots like Fig. 11(a-c)
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import textwrap
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+
+from hasel_wheel_sim.plant import run_configs
 
 from . import paper
 from .closed_loop import (FIG11_DURATION, FIG11_PROFILE, LoopLog, WheelLoop, controller_config,
@@ -40,13 +41,15 @@ def scaled_profile(scale: float):
 
 
 def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=None,
-                 wheels: int = 1, overrides: dict | None = None):
+                 wheels: int = 1, overrides: dict | None = None, same_wheel: bool = False):
     """Run each variant on the scaled profile; the first is recorded (if ``recorder``).
 
     With ``wheels`` > 1 the first variant runs that many wheels in lockstep, wheel i on the
     plant with seed ``plant_config.seed + i``, each recorded under ``/wheel<i>``; the
     results (one per variant) are wheel 0's, and the other wheels' results follow them as
-    ``"<label>, /wheel<i>"``.  ``overrides`` ({'mpc.brake_phi_a': -0.384, ...}, see
+    ``"<label>, /wheel<i>"``.  With ``same_wheel`` they are runs of one wheel instead: its
+    actuator gains drawn once, from ``plant_config.seed`` (see
+    :func:`~hasel_wheel_sim.plant.run_configs`).  ``overrides`` ({'mpc.brake_phi_a': -0.384, ...}, see
     ``ControllerConfig.with_overrides``) change every variant's controller.
     """
     profile, duration = scaled_profile(scale)
@@ -56,10 +59,8 @@ def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=N
         if overrides:
             cfg = cfg.with_overrides(overrides)
         if i == 0:
-            loops = [WheelLoop(cfg, profile, dataclasses.replace(plant_config,
-                                                                 seed=plant_config.seed + k),
-                               recorder=recorder, ns=f"/wheel{k}")
-                     for k in range(wheels)]
+            loops = [WheelLoop(cfg, profile, pc, recorder=recorder, ns=f"/wheel{k}")
+                     for k, pc in enumerate(run_configs(plant_config, wheels, same_wheel))]
             logs = run_wheels(loops, duration)
             log = logs[0]
             extra = [VariantResult(f"{label}, /wheel{k}", lg, segment_metrics(lg, profile, duration))

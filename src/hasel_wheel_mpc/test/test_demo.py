@@ -163,7 +163,7 @@ def test_closed_loop_demo_runs_n_wheels_each_under_its_namespace(tmp_path, capsy
     assert {"/wheel0/controller.yaml", "/wheel1/controller.yaml"} <= set(cfg)
     for ns in ("/wheel0", "/wheel1"):          # --set reached every wheel's controller
         assert ControllerConfig.from_yaml(cfg[f"{ns}/controller.yaml"]).mpc.brake_phi_d == -0.12
-    assert cfg["wheels"] == "2"
+    assert cfg["wheels"] == "2" and cfg["same_wheel"] == "false"
     assert [w.namespace for w in bag_metrics(bag)] == ["/wheel0", "/wheel1"]
     angles = {"/wheel0/telemetry": [], "/wheel1/telemetry": []}
     last = -1
@@ -176,6 +176,30 @@ def test_closed_loop_demo_runs_n_wheels_each_under_its_namespace(tmp_path, capsy
     assert cli.main(["bag", "replay", str(bag), "--check"]) == 0
     assert capsys.readouterr().out.count("IDENTICAL") == 2
     assert cli.main(["demo", "--out", str(tmp_path / "o"), "--wheels", "0"]) == 2
+
+
+@pytest.mark.parametrize("same_wheel", [True, False])
+def test_closed_loop_demo_records_runs_of_one_wheel_or_separate_wheels(tmp_path, capsys,
+                                                                       same_wheel):
+    """On a plant whose only random draw is the gain spread (no encoder noise), two runs of
+    one wheel (``--same-wheel``) record the very same telemetry; two wheels, each with the
+    gains of its own seed, do not."""
+    from hasel_wheel_driver.bagio import bag_configuration, read_messages
+    plant = tmp_path / "plant.yaml"
+    plant.write_text(yaml.safe_dump({"plant": {"seed": 4, "switching": "tick", "effects": {
+        "gain_spread": {"enabled": True, "std": {"value": 0.1, "unit": "1"}},
+        "encoder": {"enabled": True, "noise_std": {"value": 0.0, "unit": "rad"}}}}}))
+    out = tmp_path / "o"
+    args = ["demo", "--out", str(out), "--plant", str(plant), "--hold-scale", "0.04",
+            "--no-compare", "--wheels", "2"]
+    assert cli.main(args + (["--same-wheel"] if same_wheel else [])) == 0
+    capsys.readouterr()
+    assert bag_configuration(out / "bag")["same_wheel"] == str(same_wheel).lower()
+    raw = {"/wheel0/telemetry": [], "/wheel1/telemetry": []}
+    for topic, _t, m in read_messages(out / "bag", topics=list(raw)):
+        raw[topic].append((m.encoder_raw, m.q, m.eta))
+    assert len(raw["/wheel0/telemetry"]) > 2000
+    assert (raw["/wheel0/telemetry"] == raw["/wheel1/telemetry"]) is same_wheel
 
 
 def test_closed_loop_demo_refuses_an_unknown_override_before_writing(tmp_path, capsys):

@@ -76,6 +76,21 @@ def plant_with_model(config: PlantConfig, ext: Extensions, where: str = "plant")
     return replace(config, effects=config.effects.with_extensions(ext, f"{where}.effects"))
 
 
+def run_configs(config: PlantConfig, runs: int, same_wheel: bool = True) -> list[PlantConfig]:
+    """Plants of ``runs`` recordings: run i draws its noise from seed ``config.seed + i``.
+
+    With ``same_wheel`` the runs are of one wheel, as a researcher records one wheel several
+    times: its actuator gains (when spread) are drawn once, from ``config.seed``, and held.
+    Otherwise each run is a wheel of its own, drawing its gains from its own seed.
+    """
+    if runs < 1:
+        raise ParameterError(f"runs = {runs}: expected at least 1 recording")
+    if same_wheel:
+        gains = config.effects.extensions(np.random.default_rng(config.seed)).gains
+        config = replace(config, effects=replace(config.effects, gains=tuple(gains)))
+    return [replace(config, seed=config.seed + i) for i in range(runs)]
+
+
 def load_plant_model(wheel_params_file: str | Path, plant_file: str | Path,
                      model_file: str | Path = "") -> tuple[WheelParams, PlantConfig]:
     """The sim node's plant: (parameters, config) from its three file parameters.

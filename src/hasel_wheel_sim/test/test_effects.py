@@ -10,7 +10,8 @@ from hasel_wheel_driver.samples import Command
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
 from hasel_wheel_sim.model import Extensions
-from hasel_wheel_sim.plant import COUNT, Plant, PlantConfig
+from hasel_wheel_sim.params import ParameterError
+from hasel_wheel_sim.plant import COUNT, Plant, PlantConfig, run_configs
 from hasel_wheel_sim.trials_support import open_loop_speed
 from hasel_wheel_sim.wheel import TICK, HybridWheel
 
@@ -116,6 +117,26 @@ def test_gain_spread_draws_from_the_seed_and_makes_a_16_pad_ripple(params):
             gain_by_pad[eta[a] % 16].append(speed[b - 1] - speed[a])
     dv = np.array([np.mean(x) for x in gain_by_pad])
     assert np.corrcoef(dv, g1)[0, 1] > 0.9          # stronger pads push harder
+
+
+def test_runs_of_one_wheel_share_its_gains_and_draw_their_own_noise():
+    """Runs of one wheel hold the gains drawn from the first seed; separate wheels draw their
+    own.  Either way run i's plant has seed + i, so its encoder noise is its own."""
+    cfg = PlantConfig(seed=7, effects=effects_from_mapping(
+        {"gain_spread": REALISTIC["gain_spread"], "encoder": REALISTIC["encoder"]}))
+    drawn = cfg.effects.extensions(np.random.default_rng(7)).gains
+    one = run_configs(cfg, 3)
+    assert [c.seed for c in one] == [7, 8, 9]
+    assert all(Plant(config=c).extensions.gains == drawn for c in one)
+    apart = run_configs(cfg, 3, same_wheel=False)
+    assert [c.seed for c in apart] == [7, 8, 9]
+    assert Plant(config=apart[0]).extensions.gains == drawn
+    assert len({Plant(config=c).extensions.gains for c in apart}) == 3
+    plants = [Plant(config=c, xi2=2.0) for c in one]
+    readings = {tuple(p.step().angle for _ in range(300)) for p in plants}
+    assert len(readings) == 3                       # same wheel, same start, its own noise
+    with pytest.raises(ParameterError, match="runs = 0: expected at least 1"):
+        run_configs(cfg, 0)
 
 
 def _plant(effects, seed=1):

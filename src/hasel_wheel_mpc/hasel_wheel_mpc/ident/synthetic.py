@@ -9,7 +9,7 @@ choosing every push), read back from their bag as a user's ``hasel_wheel demo`` 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -18,7 +18,7 @@ import numpy as np
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
-from hasel_wheel_sim.plant import Plant, PlantConfig
+from hasel_wheel_sim.plant import Plant, PlantConfig, run_configs
 from hasel_wheel_sim.wheel import TICK
 
 from .data import Trial
@@ -83,14 +83,8 @@ def record_set(specs=PAPER_SET, params: WheelParams | None = None,
                config: PlantConfig | None = None) -> list[Trial]:
     """Several trials of the same wheel: trial i draws its noise from seed ``config.seed + i``,
     while the wheel's actuator gains (if spread) are drawn once, from ``config.seed``."""
-    config = config or PlantConfig(switching="tick")
-    gains = config.effects.extensions(np.random.default_rng(config.seed)).gains
-    effects = replace(config.effects, gains=tuple(gains))
-    out = []
-    for i, spec in enumerate(specs):
-        cfg = PlantConfig(seed=config.seed + i, switching=config.switching, effects=effects)
-        out.append(record(spec, params, cfg))
-    return out
+    configs = run_configs(config or PlantConfig(switching="tick"), len(specs))
+    return [record(spec, params, cfg) for spec, cfg in zip(specs, configs)]
 
 
 def encoder_trials(effects: dict, seed: int = 3, specs=SHORT_SET) -> list[Trial]:
