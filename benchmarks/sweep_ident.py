@@ -38,6 +38,7 @@ from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import metrics as M
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.ident import verdict as V
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import PlantConfig
@@ -149,27 +150,19 @@ def run(draw: Draw, specs, defects: bool) -> str:
     dt = time.perf_counter() - t0
     before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
     cid = BANDS[draw.effect][0] if draw.effect != "none" else None
-    if res.chosen == ((cid,) if cid else ()):
-        verdict = "right"
-    elif not res.chosen:
-        verdict = "missed"
-    else:
-        verdict = "wrong"
     line = (f"{draw.label()}, plant seed {draw.seed}: chosen {', '.join(res.chosen) or 'none'} "
-            f"-> {verdict}; held-out simulation error {before:.4f} -> {after:.4f} rad/s "
-            f"(x{before / after:.2f})")
+            f"-> {V.verdict(res.chosen, cid)}; held-out simulation error {before:.4f} -> "
+            f"{after:.4f} rad/s (x{before / after:.2f})")
     for c in res.chosen:
         line += f"; {c}: {estimate(c, res.final.fit.values, draw, gains)}"
+    true = None
     if cid is not None:
         base = WheelParams()
         true = M.model_error(trials, base, (C.BY_ID[cid],), candidate_truth(draw, gains, base))
-        cut = before / true
-        line += f"; true model {true:.4f} (x{cut:.2f}"
-        line += ", below the floor)" if cut < 1.0 / (1.0 - 0.10) else ")"
-        if verdict == "missed" and cut < 1.0 / (1.0 - 0.10):
-            verdict = "missed below the floor"
+        line += f"; true model {true:.4f} (x{before / true:.2f}"
+        line += ", below the floor)" if V.below_floor(before, true) else ")"
     print(line + f"; {dt:.0f} s", flush=True)
-    return verdict
+    return V.verdict(res.chosen, cid, before, true)
 
 
 def main() -> None:
