@@ -696,6 +696,20 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
                      "evaluations": com_identification.final.fit.nfev,
                      "message": com_identification.final.fit.message}
     assert all(c["converged"] is None for c in on_disk["candidates"] if not c["refitted"])
+    # every refit carries the values it reached, accepted or not, in the candidate's own
+    # parameters (with 95 % intervals) and in physical terms; the off-centre mass's are the
+    # plant's (0.004 N*m at 0.5 rad)
+    for c in on_disk["candidates"]:
+        if not c["refitted"]:
+            assert c["parameters"] is None and c["physical"] is None
+            continue
+        assert list(c["parameters"]) == [p.name for p in C.BY_ID[c["id"]].params]
+        for p in c["parameters"].values():
+            assert p["ci95"][0] <= p["value"] <= p["ci95"][1]
+    com = next(c for c in on_disk["candidates"] if c["id"] == "com_offset" and c["accepted"])
+    assert com["physical"]["torque_N_m"] == pytest.approx(0.004, rel=0.05)
+    assert com["physical"]["phase_rad"] == pytest.approx(0.5, abs=0.05)
+    assert com["parameters"]["A"]["unit"] == "N*m"
     for name in on_disk["figures"]:
         assert (tmp_path / name).stat().st_size > 5000
     per_trial = on_disk["metrics"]["after"]["simulation"]["per_trial"]

@@ -46,7 +46,10 @@ candidates                 [{round, id, score_statistic, score_dof, score_p,
                             refitted), window_rmse_rad,
                             heldout_window_rmse_rad (null: not cross-validated, the fit
                             on all trials did not beat the current model), wald_p,
-                            accepted, reason}]
+                            parameters {name: {value, unit, ci95}} (the candidate's own,
+                            as its refit on all trials ended, accepted or not; null: not
+                            refitted), physical {name: value} (the same in physical terms,
+                            Candidate.describe; null: not refitted), accepted, reason}]
 tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_rad, wald_p,
                             accepted, reason}] two effects refitted together because each
                             alone fitted the windows better but was refused
@@ -165,6 +168,12 @@ def _params(ev: Evaluation, names: list[str] | None = None) -> dict:
     return out
 
 
+def _physical(c: Candidate, ev: Evaluation) -> dict[str, float | None]:
+    """The scalar physical values (``Candidate.describe``) of ``c`` as ``ev`` fitted it."""
+    d = c.describe(np.array([ev.fit.values[p.name] for p in c.params]))
+    return {k: _num(v) for k, v in d.items() if isinstance(v, float)}
+
+
 def _physical_ci(ev: Evaluation, c, x: np.ndarray) -> dict:
     """95 % intervals of the effect's physical values (the scalar ones) by the delta method:
     the fitted parameters' covariance through a finite-difference gradient of ``describe``."""
@@ -270,6 +279,9 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                 "window_rmse_rad": _num(e.fit.rmse) if e else None,
                 "heldout_window_rmse_rad": _num(e.heldout_rmse) if e else None,
                 "wald_p": _num(e.wald_p) if e else None,
+                "parameters": (_params(e, [p.name for p in BY_ID[s.candidate].params])
+                               if e else None),
+                "physical": _physical(BY_ID[s.candidate], e) if e else None,
                 "accepted": bool(e.accepted) if e else False,
                 "reason": e.reason if e else "score test not significant"
                 if s.p_value >= 1e-6 else "significant, but others were more promising"})
@@ -467,7 +479,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
           "cross-validated by trial. Accepted: held-out simulation error down ≥ 10 %, "
           "held-out window error down, and Wald p < 1e-6.",
           "", "| round | candidate | score χ² (dof) | p | refitted: window RMSE fitted / "
-          "held-out [mrad] | Wald p | verdict |", "|---|---|---|---|---|---|---|"]
+          "held-out [mrad] | fitted values | Wald p | verdict |",
+          "|---|---|---|---|---|---|---|---|"]
     for c in data["candidates"]:
         ho = "–"
         if c["refitted"]:
@@ -476,13 +489,14 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
                   (f"{1e3 * held:.3f}" if held is not None else "not cross-validated"))
         wp = f"{c['wald_p']:.1e}" if c["wald_p"] is not None else "–"
         verdict = "**accepted**" if c["accepted"] else c["reason"]
+        fitted = ", ".join(f"{k} {_fmt(v, '.4g')}" for k, v in (c["physical"] or {}).items())
         L += [f"| {c['round']} | `{c['id']}` | {c['score_statistic']:.1f} ({c['score_dof']}) | "
-              f"{c['score_p']:.1e} | {ho} | {wp} | {verdict} |"]
+              f"{c['score_p']:.1e} | {ho} | {fitted or '–'} | {wp} | {verdict} |"]
     for c in data["tried_together"]:
         held = c["heldout_window_rmse_rad"]
         ho = (f"{1e3 * c['window_rmse_rad']:.3f} / " +
               (f"{1e3 * held:.3f}" if held is not None else "not cross-validated"))
-        L += [f"| {c['round']} | " + " + ".join(f"`{i}`" for i in c["ids"]) + f" | – | – | {ho} "
+        L += [f"| {c['round']} | " + " + ".join(f"`{i}`" for i in c["ids"]) + f" | – | – | {ho} | – "
               f"| {'–' if c['wald_p'] is None else format(c['wald_p'], '.1e')} | "
               f"{'**accepted**' if c['accepted'] else c['reason']} |"]
     L += ["", "![evidence](evidence.png)", ""]
