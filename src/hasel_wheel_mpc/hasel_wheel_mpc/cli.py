@@ -100,6 +100,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.wheels < 1:
         print(f"error: --wheels {args.wheels}: expected at least 1", file=sys.stderr)
         return 2
+    if args.same_wheel and args.wheels < 2:
+        print(f"error: --same-wheel records several runs of one wheel: give --wheels 2 or "
+              f"more (got --wheels {args.wheels})", file=sys.stderr)
+        return 2
     controller_config().with_overrides(dict(args.set or []))     # refuse a bad --set early
     out = Path(args.out)
     bag_dir = _fresh_bag_dir(out)

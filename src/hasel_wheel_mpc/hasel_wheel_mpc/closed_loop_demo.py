@@ -49,10 +49,12 @@ def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=N
     results (one per variant) are wheel 0's, and the other wheels' results follow them as
     ``"<label>, /wheel<i>"``.  With ``same_wheel`` they are runs of one wheel instead: its
     actuator gains drawn once, from ``plant_config.seed`` (see
-    :func:`~hasel_wheel_sim.plant.run_configs`).  ``overrides`` ({'mpc.brake_phi_a': -0.384, ...}, see
+    :func:`~hasel_wheel_sim.plant.run_configs`); the comparison runs are on wheel 0's plant
+    either way.  ``overrides`` ({'mpc.brake_phi_a': -0.384, ...}, see
     ``ControllerConfig.with_overrides``) change every variant's controller.
     """
     profile, duration = scaled_profile(scale)
+    plants = run_configs(plant_config, wheels, same_wheel=same_wheel)
     out, extra = [], []
     for i, (label, kw) in enumerate(variants):
         cfg = controller_config(**kw)
@@ -60,13 +62,13 @@ def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=N
             cfg = cfg.with_overrides(overrides)
         if i == 0:
             loops = [WheelLoop(cfg, profile, pc, recorder=recorder, ns=f"/wheel{k}")
-                     for k, pc in enumerate(run_configs(plant_config, wheels, same_wheel))]
+                     for k, pc in enumerate(plants)]
             logs = run_wheels(loops, duration)
             log = logs[0]
             extra = [VariantResult(f"{label}, /wheel{k}", lg, segment_metrics(lg, profile, duration))
                      for k, lg in enumerate(logs[1:], start=1)]
         else:
-            log = run_controller(cfg, profile, duration, plant_config)
+            log = run_controller(cfg, profile, duration, plants[0])
         out.append(VariantResult(label, log, segment_metrics(log, profile, duration)))
     return out + extra
 

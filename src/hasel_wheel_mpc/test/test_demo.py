@@ -202,6 +202,41 @@ def test_closed_loop_demo_records_runs_of_one_wheel_or_separate_wheels(tmp_path,
     assert (raw["/wheel0/telemetry"] == raw["/wheel1/telemetry"]) is same_wheel
 
 
+def test_the_comparison_runs_are_on_the_plant_of_the_first_wheel(monkeypatch):
+    """With runs of one wheel, wheel 0 and the comparison runs share one plant: its gains
+    held and its noise seed (not the plant of the bare configuration, whose noise would
+    follow its own draw of the gains)."""
+    from hasel_wheel_mpc import closed_loop_demo as D
+    from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
+    from hasel_wheel_sim.plant import PlantConfig, run_configs
+    seen = []
+    real_loop, real_run = D.WheelLoop, D.run_controller
+
+    def loop(cfg, profile, plant_config, **kw):
+        seen.append(("loop", plant_config))
+        return real_loop(cfg, profile, plant_config, **kw)
+
+    def run(cfg, profile, duration, plant_config):
+        seen.append(("compare", plant_config))
+        return real_run(cfg, profile, duration, plant_config)
+
+    monkeypatch.setattr(D, "WheelLoop", loop)
+    monkeypatch.setattr(D, "run_controller", run)
+    pc = PlantConfig(seed=5, switching="tick", effects=effects_from_mapping(
+        {"gain_spread": REALISTIC["gain_spread"], "encoder": REALISTIC["encoder"]}))
+    D.run_variants(pc, 0.01, D.VARIANTS[:2], wheels=2, same_wheel=True)
+    wheels = run_configs(pc, 2, same_wheel=True)
+    assert seen == [("loop", wheels[0]), ("loop", wheels[1]), ("compare", wheels[0])]
+    assert wheels[0].effects.gains is not None and pc.effects.gains is None
+
+
+def test_same_wheel_needs_several_runs(tmp_path, capsys):
+    assert cli.main(["demo", "--out", str(tmp_path / "o"), "--same-wheel"]) == 2
+    assert "--same-wheel records several runs of one wheel: give --wheels 2 or more (got " \
+        "--wheels 1)" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
 def test_closed_loop_demo_refuses_an_unknown_override_before_writing(tmp_path, capsys):
     out = tmp_path / "o"
     assert cli.main(["demo", "--out", str(out), "--set", "mpc.brake_angle=-0.3"]) == 2

@@ -76,12 +76,14 @@ def plant_with_model(config: PlantConfig, ext: Extensions, where: str = "plant")
     return replace(config, effects=config.effects.with_extensions(ext, f"{where}.effects"))
 
 
-def run_configs(config: PlantConfig, runs: int, same_wheel: bool = True) -> list[PlantConfig]:
+def run_configs(config: PlantConfig, runs: int, *, same_wheel: bool) -> list[PlantConfig]:
     """Plants of ``runs`` recordings: run i draws its noise from seed ``config.seed + i``.
 
     With ``same_wheel`` the runs are of one wheel, as a researcher records one wheel several
     times: its actuator gains (when spread) are drawn once, from ``config.seed``, and held.
-    Otherwise each run is a wheel of its own, drawing its gains from its own seed.
+    Otherwise each run is a wheel of its own, drawing its gains from its own seed.  (Held
+    gains are not drawn, so run 0 of one wheel draws other noise than a plant of
+    ``config`` itself, which draws its gains first.)
     """
     if runs < 1:
         raise ParameterError(f"runs = {runs}: expected at least 1 recording")

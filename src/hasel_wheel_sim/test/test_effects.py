@@ -125,7 +125,7 @@ def test_runs_of_one_wheel_share_its_gains_and_draw_their_own_noise():
     cfg = PlantConfig(seed=7, effects=effects_from_mapping(
         {"gain_spread": REALISTIC["gain_spread"], "encoder": REALISTIC["encoder"]}))
     drawn = cfg.effects.extensions(np.random.default_rng(7)).gains
-    one = run_configs(cfg, 3)
+    one = run_configs(cfg, 3, same_wheel=True)
     assert [c.seed for c in one] == [7, 8, 9]
     assert all(Plant(config=c).extensions.gains == drawn for c in one)
     apart = run_configs(cfg, 3, same_wheel=False)
@@ -136,7 +136,7 @@ def test_runs_of_one_wheel_share_its_gains_and_draw_their_own_noise():
     readings = {tuple(p.step().angle for _ in range(300)) for p in plants}
     assert len(readings) == 3                       # same wheel, same start, its own noise
     with pytest.raises(ParameterError, match="runs = 0: expected at least 1"):
-        run_configs(cfg, 0)
+        run_configs(cfg, 0, same_wheel=True)
 
 
 def _plant(effects, seed=1):

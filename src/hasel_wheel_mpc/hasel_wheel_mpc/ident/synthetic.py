@@ -83,7 +83,10 @@ def record_set(specs=PAPER_SET, params: WheelParams | None = None,
                config: PlantConfig | None = None) -> list[Trial]:
     """Several trials of the same wheel: trial i draws its noise from seed ``config.seed + i``,
     while the wheel's actuator gains (if spread) are drawn once, from ``config.seed``."""
-    configs = run_configs(config or PlantConfig(switching="tick"), len(specs))
+    specs = list(specs)
+    if not specs:
+        return []
+    configs = run_configs(config or PlantConfig(switching="tick"), len(specs), same_wheel=True)
     return [record(spec, params, cfg) for spec, cfg in zip(specs, configs)]
 
 
