@@ -26,7 +26,17 @@ def test_verdicts(chosen, truth, true_error, expected):
     assert verdict(chosen, truth, 0.100, true_error) == expected
 
 
-def test_a_floor_needs_positive_errors():
+def test_the_choice_may_come_as_any_sequence():
+    assert verdict(["viscous_drag"], "viscous_drag") == "right"
+    assert verdict([], None) == "right"
+
+
+def test_bad_arguments_are_refused_with_what_is_expected():
     with pytest.raises(ValueError, match=r"must be positive \[rad/s\], got before=0.1, "
                                          r"true_error=0.0"):
         below_floor(0.1, 0.0)
+    with pytest.raises(ValueError, match=r"min_gain must be a fraction in \[0, 1\) \(0.10 is "
+                                         r"a 10 % cut\), got 10"):
+        below_floor(0.1, 0.05, min_gain=10)
+    with pytest.raises(ValueError, match="true_error needs before"):
+        verdict((), "viscous_drag", true_error=0.05)
