@@ -705,11 +705,18 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
             continue
         assert list(c["parameters"]) == [p.name for p in C.BY_ID[c["id"]].params]
         for p in c["parameters"].values():
-            assert p["ci95"][0] <= p["value"] <= p["ci95"][1]
+            assert None not in p["ci95"] and p["ci95"][0] <= p["value"] <= p["ci95"][1]
     com = next(c for c in on_disk["candidates"] if c["id"] == "com_offset" and c["accepted"])
     assert com["physical"]["torque_N_m"] == pytest.approx(0.004, rel=0.05)
     assert com["physical"]["phase_rad"] == pytest.approx(0.5, abs=0.05)
     assert com["parameters"]["A"]["unit"] == "N*m"
+    # report.md's candidates table: every row has the header's cells, and the fitted values
+    md = (tmp_path / "report.md").read_text().splitlines()
+    head = md.index(next(r for r in md if r.startswith("| round | candidate |")))
+    rows = md[head:md.index("", head)]
+    assert len(rows) == 2 + len(on_disk["candidates"]) + len(on_disk["tried_together"])
+    assert {r.count(" | ") for r in rows if not r.startswith("|---")} == {7}
+    assert any("`com_offset`" in r and "torque_N_m 0.00" in r for r in rows)
     for name in on_disk["figures"]:
         assert (tmp_path / name).stat().st_size > 5000
     per_trial = on_disk["metrics"]["after"]["simulation"]["per_trial"]

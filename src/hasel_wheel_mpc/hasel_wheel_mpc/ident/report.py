@@ -48,8 +48,8 @@ candidates                 [{round, id, score_statistic, score_dof, score_p,
                             on all trials did not beat the current model), wald_p,
                             parameters {name: {value, unit, ci95}} (the candidate's own,
                             as its refit on all trials ended, accepted or not; null: not
-                            refitted), physical {name: value} (the same in physical terms,
-                            Candidate.describe; null: not refitted), accepted, reason}]
+                            refitted), physical {name: value} (the scalar ones of the same
+                            in physical terms, Candidate.describe; null: not refitted), accepted, reason}]
 tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_rad, wald_p,
                             accepted, reason}] two effects refitted together because each
                             alone fitted the windows better but was refused
