@@ -6,7 +6,8 @@ For each case, three runs of one wheel (``hasel_wheel demo --wheels 3 --same-whe
 closed by the observer, estimator and MPC) on a plant with one effect switched on, never
 declared to the tool, through the 10-bit encoder with 1 mrad noise, switching on the
 firmware's ticks, plant seed 3.  The runs are recorded to an MCAP bag and identified from
-it, as ``hasel_wheel identify <bag>`` does.  Each line prints what was chosen against the
+it, as ``hasel_wheel identify <bag>`` does but without the residual analysis (which runs
+after the choice and does not change it).  Each line prints what was chosen against the
 truth, the estimate, the held-out simulation error before and after, the error of the true
 model (the plant's own parameters: where it is not 10 % below the nominal fit's held-out
 error, the tool's bar, no fit could pass it either: "below the floor") and the wall time.
@@ -17,7 +18,7 @@ These recordings have no coast-down either (the wheel is driven to the end), so 
 fitted with the force law.
 
 Run: ``.venv/bin/python benchmarks/bench_ident_closed_loop.py [--only SUBSTRING]`` (about
-15 minutes; the recordings about 35 s each).
+12 minutes; the recordings about 25 s each).
 """
 from __future__ import annotations
 
@@ -30,7 +31,8 @@ from pathlib import Path
 import hasel_wheel_mpc  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
 import numpy as np
 
-from hasel_wheel_mpc.closed_loop_demo import run_variants, VARIANTS
+from hasel_wheel_mpc.closed_loop import FIG11_DURATION
+from hasel_wheel_mpc.closed_loop_demo import VARIANTS, run_variants
 from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import metrics as M
@@ -112,6 +114,9 @@ def estimate(cid: str, fit_values: dict[str, float], truth: dict[str, float]) ->
 
 
 def run(label: str, effects: dict, cid: str | None, values: dict[str, float]) -> str:
+    """Record and identify one case (``effects`` on the plant; ``cid`` the candidate that
+    should be named, ``values`` its parameters at the plant's); print its line, return the
+    verdict (:func:`~hasel_wheel_mpc.ident.verdict.verdict`)."""
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / "bag"
         t0 = time.perf_counter()
@@ -142,7 +147,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--only", default="", help="run only the cases whose label holds this")
     args = ap.parse_args()
-    print(f"{RUNS} closed-loop runs of one wheel, {230 * HOLD_SCALE:.0f} s each (the demo's "
+    print(f"{RUNS} closed-loop runs of one wheel, {FIG11_DURATION * HOLD_SCALE:.0f} s each (the demo's "
           f"profile), plant seed {SEED}, 10-bit encoder with 1 mrad noise, tick switching",
           flush=True)
     t0 = time.perf_counter()
