@@ -717,6 +717,14 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     assert len(rows) == 2 + len(on_disk["candidates"]) + len(on_disk["tried_together"])
     assert {r.count(" | ") for r in rows if not r.startswith("|---")} == {7}
     assert any("`com_offset`" in r and "torque_N_m 0.00" in r for r in rows)
+    # the accepted refit stopped at its limit and ran on (above): its row says so, and the
+    # chosen effect's values are the run-on fit's
+    assert [c["id"] for c in on_disk["candidates"] if c["ran_on"]] == ["com_offset"]
+    assert com["ran_on"] and any("`com_offset`" in r and "it ran on to the chosen values" in r
+                                 for r in rows)
+    chosen = on_disk["effects"][0]
+    assert chosen["id"] == "com_offset"
+    assert chosen["physical"]["torque_N_m"] == pytest.approx(0.004, rel=0.05)
     for name in on_disk["figures"]:
         assert (tmp_path / name).stat().st_size > 5000
     per_trial = on_disk["metrics"]["after"]["simulation"]["per_trial"]

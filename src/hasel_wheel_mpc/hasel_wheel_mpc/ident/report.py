@@ -49,7 +49,11 @@ candidates                 [{round, id, score_statistic, score_dof, score_p,
                             parameters {name: {value, unit, ci95}} (the candidate's own,
                             as its refit on all trials ended, accepted or not; null: not
                             refitted), physical {name: value} (the scalar ones of the same
-                            in physical terms, Candidate.describe; null: not refitted), accepted, reason}]
+                            in physical terms, Candidate.describe; null: not refitted),
+                            accepted, ran_on (true: this refit stopped at its limit and
+                            became the final model by running on from there, so the
+                            chosen effects' values are the run-on fit's, not these),
+                            reason}]
 tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_rad, wald_p,
                             accepted, reason}] two effects refitted together because each
                             alone fitted the windows better but was refused
@@ -283,6 +287,8 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                                if e else None),
                 "physical": _physical(BY_ID[s.candidate], e) if e else None,
                 "accepted": bool(e.accepted) if e else False,
+                "ran_on": bool(e is not None and e is not ident.final
+                               and e.effects == ident.final.effects),
                 "reason": e.reason if e else "score test not significant"
                 if s.p_value >= 1e-6 else "significant, but others were more promising"})
     after = ident.diagnostics_after
@@ -490,6 +496,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
         wp = f"{c['wald_p']:.1e}" if c["wald_p"] is not None else "–"
         verdict = "**accepted**" if c["accepted"] else c["reason"]
         fitted = ", ".join(f"{k} {_fmt(v, '.4g')}" for k, v in (c["physical"] or {}).items())
+        if c["ran_on"]:
+            fitted += " (where its fit stopped; it ran on to the chosen values above)"
         L += [f"| {c['round']} | `{c['id']}` | {c['score_statistic']:.1f} ({c['score_dof']}) | "
               f"{c['score_p']:.1e} | {ho} | {fitted or '–'} | {wp} | {verdict} |"]
     for c in data["tried_together"]:
