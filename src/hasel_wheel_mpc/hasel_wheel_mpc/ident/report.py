@@ -50,12 +50,12 @@ candidates                 [{round, id, score_statistic, score_dof, score_p,
                             as its refit on all trials ended, accepted or not; null: not
                             refitted), physical {name: value} (the scalar ones of the same
                             in physical terms, Candidate.describe; null: not refitted),
-                            accepted, ran_on (true: this refit stopped at its limit and
-                            became the final model by running on from there, so the
-                            chosen effects' values are the run-on fit's, not these),
-                            reason}]
+                            accepted, ran_on (true for the one refit that stopped at its
+                            limit and ran on from there into the final model, whose values,
+                            under effects, are then the run-on fit's, not these;
+                            Identification.ran_on_from), reason}]
 tried_together             [{round, ids, window_rmse_rad, heldout_window_rmse_rad, wald_p,
-                            accepted, reason}] two effects refitted together because each
+                            accepted, ran_on (as for candidates), reason}] two effects refitted together because each
                             alone fitted the windows better but was refused
                             (select.supported_pair), or one alone was accepted and the
                             other, refused, fitted the held-out windows as well
@@ -146,6 +146,8 @@ from .fit import effect_wald_p
 from .select import Evaluation, Identification
 
 SCHEMA = "hasel_wheel.identification/1"
+#: report.md's note on the refit that stopped at its limit and ran on into the final model
+RAN_ON_NOTE = "(where its fit stopped; it ran on to the chosen values above)"
 
 
 def _num(v):
@@ -271,7 +273,8 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
         together += [{"round": k + 1, "ids": list(e.effects[one - 1:]),
                       "window_rmse_rad": _num(e.fit.rmse),
                       "heldout_window_rmse_rad": _num(e.heldout_rmse), "wald_p": _num(e.wald_p),
-                      "accepted": bool(e.accepted), "reason": e.reason}
+                      "accepted": bool(e.accepted), "ran_on": e is ident.ran_on_from,
+                      "reason": e.reason}
                      for e in rd if len(e.effects) > one]
         for s in scs:
             e = evs.get(s.candidate)
@@ -287,8 +290,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                                if e else None),
                 "physical": _physical(BY_ID[s.candidate], e) if e else None,
                 "accepted": bool(e.accepted) if e else False,
-                "ran_on": bool(e is not None and e is not ident.final
-                               and e.effects == ident.final.effects),
+                "ran_on": e is not None and e is ident.ran_on_from,
                 "reason": e.reason if e else "score test not significant"
                 if s.p_value >= 1e-6 else "significant, but others were more promising"})
     after = ident.diagnostics_after
@@ -497,7 +499,7 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
         verdict = "**accepted**" if c["accepted"] else c["reason"]
         fitted = ", ".join(f"{k} {_fmt(v, '.4g')}" for k, v in (c["physical"] or {}).items())
         if c["ran_on"]:
-            fitted += " (where its fit stopped; it ran on to the chosen values above)"
+            fitted = (fitted + " " if fitted else "") + RAN_ON_NOTE
         L += [f"| {c['round']} | `{c['id']}` | {c['score_statistic']:.1f} ({c['score_dof']}) | "
               f"{c['score_p']:.1e} | {ho} | {fitted or '–'} | {wp} | {verdict} |"]
     for c in data["tried_together"]:
@@ -506,7 +508,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
               (f"{1e3 * held:.3f}" if held is not None else "not cross-validated"))
         L += [f"| {c['round']} | " + " + ".join(f"`{i}`" for i in c["ids"]) + f" | – | – | {ho} | – "
               f"| {'–' if c['wald_p'] is None else format(c['wald_p'], '.1e')} | "
-              f"{'**accepted**' if c['accepted'] else c['reason']} |"]
+              f"{'**accepted**' if c['accepted'] else c['reason']}"
+              f"{' ' + RAN_ON_NOTE if c['ran_on'] else ''} |"]
     L += ["", "![evidence](evidence.png)", ""]
     L += ["## Residual diagnostics", ""]
     for label, d in (("nominal", ident.diagnostics_before), ("identified", ident.diagnostics_after)):

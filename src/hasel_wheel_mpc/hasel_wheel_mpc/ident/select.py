@@ -209,6 +209,10 @@ class Identification:
     #: periodic signatures of the residual that their refit did not confirm
     #: (:func:`~.periodic.confirmed`): listed apart, not as unexplained structure
     unconfirmed: list[Signature] = field(default_factory=list)
+    #: the refit (one of ``rounds``' evaluations, or a restart's) that stopped at its limit
+    #: and ran on into ``final``, whose values are therefore not its own; None when the
+    #: final model did not run on
+    ran_on_from: Evaluation | None = None
 
     @property
     def chosen(self) -> tuple[str, ...]:
@@ -887,7 +891,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
             more.reason = (f"{current.reason}; its fit ran on from where it stopped at its "
                            f"limit ({more.fit.nfev} evaluations in all; held-out figures from "
                            f"the folds fitted from where it stopped)")
-            current = more
+            ident.ran_on_from, current = current, more
     ident.final = current
     if analyse_residuals:
         say("residual analysis")
