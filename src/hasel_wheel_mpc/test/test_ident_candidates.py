@@ -185,3 +185,36 @@ def test_a_refit_refused_as_a_stand_in_makes_room_for_the_next_candidates():
     # refused with plausible values and no window gain either: nothing more
     assert further_refits(scores, done, [_refit(("gain_spread",), 0.76e-3)], current, 0.10,
                           2) == []
+
+
+def _held_out(effects, window_rmse, sim_rmse, accepted=False, plausible=True, wald_p=0.0):
+    from hasel_wheel_mpc.ident.metrics import TrialMetrics
+    from hasel_wheel_mpc.ident.select import Evaluation
+    # two held-out trials of 100 samples each at the same error: pooled = sim_rmse
+    return Evaluation(effects, None, window_rmse, {}, wald_p=wald_p, accepted=accepted,
+                      plausible=plausible, reason="r", sim_heldout={
+                          n: TrialMetrics(n, sim_rmse, 0.9, 0.05, 0.0, 100) for n in "ab"})
+
+
+def test_near_misses_are_the_refits_only_the_free_run_bar_turned_away():
+    import types
+    from hasel_wheel_mpc.ident.select import near_misses
+    final = _held_out(("com_offset",), 0.300e-3, 0.0400, accepted=True)
+    close = _held_out(("com_offset", "rise_lag"), 0.290e-3, 0.0370)       # 7.5 % lower
+    closer = _held_out(("com_offset", "viscous_drag"), 0.295e-3, 0.0364)  # 9.0 % lower
+    others = [
+        _held_out(("com_offset", "gain_spread"), 0.290e-3, 0.0359),        # 10.25 %: the bar
+        _held_out(("com_offset", "charge_retention"), 0.290e-3, 0.0370, wald_p=1e-5),
+        _held_out(("com_offset", "angle_offset"), 0.290e-3, 0.0370, plausible=False),
+        _held_out(("com_offset", "platform_periodic"), 0.301e-3, 0.0370),  # windows worse
+        _held_out(("com_offset", "angle_eccentricity"), 0.290e-3, 0.0401),  # free run worse
+        _held_out(("com_offset", "rise_lag"), math.nan, 0.0370),           # not cross-validated
+    ]
+    ident = types.SimpleNamespace(final=final, rounds=[[final], [close, *others, closer]])
+    assert near_misses(ident) == [closer, close]
+    # with a 5 % bar the 7.5 % and 9 % cuts would have passed it: not near misses
+    assert near_misses(ident, min_gain=0.05) == []
+    # a last round that added an effect has none; nor has a search without rounds
+    ident.rounds[-1].append(_held_out(("com_offset", "x"), 0.2e-3, 0.02, accepted=True))
+    assert near_misses(ident) == []
+    assert near_misses(types.SimpleNamespace(final=final, rounds=[])) == []

@@ -25,6 +25,7 @@ def test_identify_writes_the_report_from_csv_files(tmp_path, capsys):
     assert {t["name"] for t in data["trials"]} == {"phi_a_2deg", "phi_a_6deg"}
     assert {c["id"] for c in data["candidates"]} == {"viscous_drag", "com_offset"}
     assert not any(c["ran_on"] for c in data["candidates"] + data["tried_together"])
+    assert data["near_misses"] == []
     assert (out / "model.yaml").exists() and (out / "report.md").exists()
     assert "chosen effects: none" in capsys.readouterr().out
     # the BLAS that ran the fits is on record (empty without threadpoolctl)

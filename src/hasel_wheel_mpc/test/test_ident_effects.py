@@ -684,7 +684,7 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     on_disk = json.loads((tmp_path / "report.json").read_text())
     assert on_disk["chosen_effects"] == ["com_offset"] == data["chosen_effects"]
     for key in ("schema", "trials", "friction", "nominal", "effects", "candidates",
-                "unexplained", "metrics", "diagnostics", "paper_table3", "model_file",
+                "near_misses", "unexplained", "metrics", "diagnostics", "paper_table3", "model_file",
                 "figures", "fits"):
         assert key in on_disk
     # the model with the right effect converges: here it stops at the limit of 100 and

@@ -94,6 +94,12 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             amplitude_rad_s2 is the constant acceleration error per window
                             that leaves as much correlated residual
                             (residual.autocorrelation_signature)
+near_misses                [{ids, physical {id: {name: value}}, wald_p,
+                            heldout_simulation_rmse_rad_s,
+                            final_heldout_simulation_rmse_rad_s, cut (1 - the two's ratio),
+                            reason}] refits that only the free-run
+                            bar (a 10 % cut) turned away (select.near_misses): refused, not
+                            named; [] when none
 unconfirmed                [{axis, period, amplitude_rad_s2, p_value, torque_ci95_N_m,
                             text}] periods the residual's periodograms showed that their
                             refit did not confirm (periodic.confirmed: the refit's Wald p
@@ -143,7 +149,7 @@ from .metrics import TrialMetrics, pooled_rmse
 from .prediction import PREDICTION_SPAN
 from .residual import Diagnostics
 from .fit import effect_wald_p
-from .select import Evaluation, Identification
+from .select import Evaluation, Identification, near_misses
 
 SCHEMA = "hasel_wheel.identification/1"
 #: report.md's note on the refit that stopped at its limit and ran on into the final model
@@ -178,6 +184,30 @@ def _physical(c: Candidate, ev: Evaluation) -> dict[str, float | None]:
     """The scalar physical values (``Candidate.describe``) of ``c`` as ``ev`` fitted it."""
     d = c.describe(np.array([ev.fit.values[p.name] for p in c.params]))
     return {k: _num(v) for k, v in d.items() if isinstance(v, float)}
+
+
+def _near_miss(e: Evaluation, final: Evaluation) -> dict:
+    """A refit :func:`~.select.near_misses` lists, for report.json."""
+    added = e.effects[len(final.effects):]
+    return {"ids": list(added),
+            "physical": {i: _physical(BY_ID[i], e) for i in added},
+            "wald_p": _num(e.wald_p),
+            "heldout_simulation_rmse_rad_s": _num(e.sim_heldout_rmse),
+            "final_heldout_simulation_rmse_rad_s": _num(final.sim_heldout_rmse),
+            "cut": _num(1.0 - e.sim_heldout_rmse / final.sim_heldout_rmse),
+            "reason": e.reason}
+
+
+def near_miss_text(m: dict) -> str:
+    """One line on a ``near_misses`` entry of report.json."""
+    values = "; ".join(f"{i}: " + ", ".join(f"{k} {_fmt(v, '.4g')}"
+                                             for k, v in m["physical"][i].items())
+                       for i in m["ids"])
+    return (f"{'+'.join(m['ids'])} ({values}): Wald p {_fmt(m['wald_p'], '.1e')}, held-out "
+            f"simulation error {_fmt(m['final_heldout_simulation_rmse_rad_s'], '.4f')} -> "
+            f"{_fmt(m['heldout_simulation_rmse_rad_s'], '.4f')} rad/s "
+            f"({_fmt(None if m['cut'] is None else 100 * m['cut'], '.1f')} % lower; the bar "
+            f"is 10 %)")
 
 
 def _physical_ci(ev: Evaluation, c, x: np.ndarray) -> dict:
@@ -322,6 +352,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
              "drift_devices": {k: {n: _num(v) if n != "unit" else v for n, v in d.items()}
                                for k, d in s.devices.items()}}
             for s in after.signatures],
+        "near_misses": [_near_miss(e, ident.final) for e in near_misses(ident)],
         "unconfirmed": [{"axis": s.axis, "period": _num(s.period),
                          "amplitude_rad_s2": _num(s.amplitude), "p_value": _num(s.p_value),
                          "torque_ci95_N_m": None if s.torque_ci95 is None else
@@ -435,7 +466,13 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
                     L += [f"  * **caution:** {k['caution']}"]
         L += [""]
     else:
-        L += ["**No candidate effect is supported by the data; the paper's model is kept.**", ""]
+        L += ["**No candidate effect passed every test; the paper's model is kept.**", ""]
+    if data["near_misses"]:
+        L += ["Refused, though only the free-run bar stood in the way (plausible values, Wald "
+              "p < 1e-6, the held-out windows fitted better, the held-out simulation error "
+              "lower but by less than 10 %); not named, since look-alikes of an effect can do "
+              "as much, but worth a check with more varied data:", ""]
+        L += [f"* {near_miss_text(m)}" for m in data["near_misses"]] + [""]
     if data["unexplained"]:
         L += ["Structure the model does **not** explain (no candidate in the library fits it):", ""]
         L += [f"* {u['text']} (p = {u['p_value']:.1e})" for u in data["unexplained"]] + [""]
