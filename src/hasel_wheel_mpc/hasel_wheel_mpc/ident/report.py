@@ -98,8 +98,8 @@ near_misses                [{ids, physical {id: {name: value}}, wald_p,
                             heldout_simulation_rmse_rad_s,
                             final_heldout_simulation_rmse_rad_s, cut (1 - the two's ratio),
                             reason}] refits that only the free-run
-                            bar (a 10 % cut) turned away (select.near_misses): refused, not
-                            named; [] when none
+                            bar (a 10 % cut) turned away, with a cut of at least 5 %
+                            (select.near_misses): refused, not named; [] when none
 unconfirmed                [{axis, period, amplitude_rad_s2, p_value, torque_ci95_N_m,
                             text}] periods the residual's periodograms showed that their
                             refit did not confirm (periodic.confirmed: the refit's Wald p
@@ -470,7 +470,7 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
     if data["near_misses"]:
         L += ["Refused, though only the free-run bar stood in the way (plausible values, Wald "
               "p < 1e-6, the held-out windows fitted better, the held-out simulation error "
-              "lower but by less than 10 %); not named, since look-alikes of an effect can do "
+              "lower by 5 % or more but by less than 10 %); not named, since look-alikes of an effect can do "
               "as much, but worth a check with more varied data:", ""]
         L += [f"* {near_miss_text(m)}" for m in data["near_misses"]] + [""]
     if data["unexplained"]:

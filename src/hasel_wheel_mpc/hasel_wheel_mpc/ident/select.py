@@ -378,14 +378,16 @@ def near_misses(ident: Identification, min_gain: float = 0.10) -> list[Evaluatio
     """The refits that only the free-run bar turned away, best first: in the search's last
     round, which added nothing, the refused refits with plausible values, a Wald p under
     1e-6, a lower held-out window RMSE than the final model's, and a held-out simulation
-    error below the final model's by less than ``min_gain`` [1].  [] when the last round
-    added an effect.
+    error below the final model's by less than ``min_gain`` [1] but by at least half of it.
+    [] when the last round added an effect.
 
     The bar keeps look-alikes out, so these are not named; but a reader should see them.
     Seen with a 40 ms rise lag in three closed-loop runs of one wheel (the demo's profile at
     half length, plant seed 3; ad hoc): its refit reached 38.8 ms with a Wald p of 0 and cut
     the held-out simulation error by 9.2 %, and the report said only that nothing was
-    supported."""
+    supported.  (Half the bar: with effects outside the library, an angle eccentricity
+    passed all the rest with cuts of 0.8 and 1.8 % on data of a gain spread and of charge
+    retention; 3 x 34 s, plant seed 11; ad hoc.)"""
     if not ident.rounds or any(e.accepted for e in ident.rounds[-1]):
         return []
     cur = ident.final
@@ -393,7 +395,7 @@ def near_misses(ident: Identification, min_gain: float = 0.10) -> list[Evaluatio
            if not e.accepted and e.plausible and e.wald_p < 1e-6
            and math.isfinite(e.heldout_rmse) and e.heldout_rmse < cur.heldout_rmse
            and cur.sim_heldout_rmse * (1.0 - min_gain) < e.sim_heldout_rmse
-           < cur.sim_heldout_rmse]
+           <= cur.sim_heldout_rmse * (1.0 - 0.5 * min_gain)]
     return sorted(out, key=lambda e: e.sim_heldout_rmse)
 
 
