@@ -71,7 +71,7 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(f"  {e['id']}: " + ", ".join(f"{k} = {v:.4g}" for k, v in e["physical"].items()
                                              if isinstance(v, float)))
     for m in data["near_misses"]:
-        print(f"  refused, only by the free-run bar: {near_miss_text(m)}")
+        print(f"  near miss, refused at the free-run bar: {near_miss_text(m)}")
     for u in data["unexplained"]:
         print(f"  unexplained: {u['text']}")
     mb, ma = data["metrics"]["before"], data["metrics"]["after"]
