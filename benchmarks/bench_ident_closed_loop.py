@@ -96,10 +96,9 @@ def true_values(cid: str, values: dict[str, float], cfg: PlantConfig) -> dict[st
     out = dict(F.force_coordinates(base), tau_f=base.tau_f, brake_gain=base.brake_gain,
                **values)
     if cid == "gain_spread":
-        gains = np.array(cfg.effects.extensions(np.random.default_rng(cfg.seed)).gains)
-        d = np.log(gains) - np.mean(np.log(gains))
-        out["peak"] *= float(np.exp(np.mean(np.log(gains))))
-        out.update({f"d{i}": float(d[i]) for i in range(1, d.size)})
+        mean, logs = C.spread_values(cfg.effects.extensions(np.random.default_rng(cfg.seed)).gains)
+        out["peak"] *= mean
+        out.update(logs)
     return out
 
 

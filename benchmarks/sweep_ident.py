@@ -120,9 +120,8 @@ def candidate_truth(draw: Draw, gains: tuple[float, ...], base: WheelParams) -> 
         return {**coords, "E": v["amplitude"] * math.sin(v["phase"]),
                 "F": v["amplitude"] * math.cos(v["phase"])}
     if draw.effect == "gain_spread":
-        d = np.log(gains) - np.mean(np.log(gains))
-        return {**coords, "peak": coords["peak"] * float(np.exp(np.mean(np.log(gains)))),
-                **{f"d{i}": float(d[i]) for i in range(1, len(d))}}
+        mean, logs = C.spread_values(gains)
+        return {**coords, "peak": coords["peak"] * mean, **logs}
     return coords
 
 

@@ -26,6 +26,20 @@ def test_a_once_per_turn_gain_pattern_is_named_with_its_harmonic():
     assert why is not None and "1 per wheel turn" in why and "100 %" in why
 
 
+def test_a_wheels_gains_in_the_spread_candidates_terms_give_them_back():
+    # gains 2^(k/8) over the pads: geometric mean 2^(15/16), and the candidate (whose gains
+    # have a geometric mean of 1) times that mean returns them
+    gains = 2.0 ** (np.arange(16) / 8.0)
+    mean, logs = C.spread_values(gains)
+    assert mean == pytest.approx(2.0 ** (15 / 16))
+    assert logs["d1"] == pytest.approx(math.log(2) * (1 / 8 - 15 / 16))
+    x = [logs[f"d{i}"] for i in range(1, 16)]
+    np.testing.assert_allclose(mean * np.array(C.BY_ID["gain_spread"].describe(x)["gains"]),
+                               gains, rtol=1e-12)
+    with pytest.raises(ValueError, match="expected 16 positive gains"):
+        C.spread_values([1.0] * 15 + [0.0])
+
+
 def test_independent_gains_share_their_variance_as_the_beta_law_says():
     # under independence the first harmonic's share is Beta(1, 13/2): P(share > s) = (1-s)^6.5
     rng = np.random.default_rng(7)

@@ -132,6 +132,18 @@ def _spread_gains(x) -> tuple[float, ...]:
     return tuple(float(v) for v in np.exp(np.concatenate(([-np.sum(x)], x))))
 
 
+def spread_values(gains) -> tuple[float, dict[str, float]]:
+    """A wheel's actuator gains (16,) [1] in ``gain_spread``'s terms: (their geometric mean
+    [1], which scales the force law's peak, and the candidate's log-gains {"d1".."d15"}
+    [1] of the gains over that mean).  The inverse of the candidate's gains."""
+    g = np.asarray(gains, dtype=float)
+    if g.shape != (N_ACTUATORS,) or not np.all((g > 0.0) & np.isfinite(g)):
+        raise ValueError(f"expected {N_ACTUATORS} positive gains, got {gains!r}")
+    logs = np.log(g)
+    d = logs - np.mean(logs)
+    return float(np.exp(np.mean(logs))), {f"d{i}": float(d[i]) for i in range(1, N_ACTUATORS)}
+
+
 #: Below this p-value a gain pattern is too smooth around the wheel for fabrication spread.
 SPREAD_PATTERN_P = 1e-3
 
