@@ -135,8 +135,19 @@ def run(label: str, effects: dict, cid: str | None, values: dict[str, float]) ->
         true = M.model_error(trials, WheelParams(), (C.BY_ID[cid],), true_values(cid, values, cfg))
         line += f"; true model {true:.4f} (x{before / true:.2f})"
     verdict = V.verdict(res.chosen, cid, before, true)
+    if cid == "gain_spread":
+        gains = cfg.effects.extensions(np.random.default_rng(cfg.seed)).gains
+        line += f" (the gains drawn: std {np.std(gains):.4f} as drawn)"
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'}"
                        for r in res.rounds for e in r)
+    for e in SEL.near_misses(res):
+        fitted = C.BY_ID[e.effects[-1]].describe(
+            [e.fit.values[p.name] for p in C.BY_ID[e.effects[-1]].params])
+        refits += (f"; near miss {'+'.join(e.effects)}: "
+                   + ", ".join(f"{k} {v:.4g}" for k, v in fitted.items() if isinstance(v, float))
+                   + f", held-out simulation error {res.final.sim_heldout_rmse:.4f} -> "
+                   f"{e.sim_heldout_rmse:.4f} rad/s "
+                   f"({100 * (1 - e.sim_heldout_rmse / res.final.sim_heldout_rmse):.1f} % lower)")
     print(f"{line}; refits: {refits or 'none'}; {verdict.upper()}; recorded in {t_rec:.0f} s, "
           f"identified in {dt:.0f} s", flush=True)
     return verdict
