@@ -254,6 +254,36 @@ def test_a_slow_rise_lag_that_the_force_law_bends_to_mimic_is_found_by_the_scan(
     assert before - after >= 0.9 * (before - floor)
 
 
+#: one pad that has broken down (0.05 of the others' force), and the widest spread the plant
+#: draws (std 0.5, seed 3: two pads at 0.078 of the geometric mean, one at 4.2 times it)
+BROKEN_PAD = {"actuator_gains": [1.0] * 5 + [0.05] + [1.0] * 10}
+WIDE_SPREAD = {"gain_spread": {"enabled": True, "std": {"value": 0.5, "unit": "1"}}}
+
+
+@pytest.mark.parametrize("effects", [BROKEN_PAD, WIDE_SPREAD], ids=["broken_pad", "std_0.5"])
+def test_gains_far_from_the_mean_are_measured_not_stopped_at_a_bound(effects):
+    # the plant's gains relative to their geometric mean, as the candidate reports them
+    truth = np.array(effects_from_mapping(effects).extensions(np.random.default_rng(3)).gains)
+    truth /= np.exp(np.mean(np.log(truth)))
+    assert truth.min() < 0.1                       # beyond the old bound of e^-1.5 = 0.22
+    res = SEL.identify(_trials(effects), k_folds=3, max_effects=1, analyse_residuals=False)
+    assert res.chosen == ("gain_spread",)
+    v = res.final.fit.values
+    got = np.array(C.BY_ID["gain_spread"].describe([v[f"d{i}"] for i in range(1, 16)])["gains"])
+    weak = truth < 0.1
+    # a weak pad's gain is measured to about the same force as any other pad's, so its
+    # tolerance is absolute: 0.03 of the mean's force (measured: 0.0001; 0.010 and 0.021),
+    # and its 95 % interval holds the truth (log-gains d_i = ln g_i for pads 1..15; both
+    # weak pads of the wide spread are among them); every other gain within 8 % (measured:
+    # at most 3.0 % and 2.7 %)
+    np.testing.assert_allclose(got[weak], truth[weak], atol=0.03)
+    ci = res.final.fit.ci95
+    for i in np.flatnonzero(weak):
+        assert i > 0 and ci[f"d{i}"][0] < math.log(truth[i]) < ci[f"d{i}"][1]
+    np.testing.assert_allclose(got[~weak], truth[~weak], rtol=0.08)
+    assert res.final.sim_heldout_rmse <= 0.5 * res.nominal.sim_heldout_rmse
+
+
 def test_two_effects_that_each_fail_the_free_run_alone_are_named_together():
     # viscous drag and a gain spread at once (plant seed 4): each refitted alone cuts the
     # window RMSE by ~14 %, but the gain spread alone raised the held-out simulation error
