@@ -36,6 +36,7 @@ from hasel_wheel_mpc.closed_loop_demo import VARIANTS, run_variants
 from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import metrics as M
+from hasel_wheel_mpc.ident import report as R
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import verdict as V
 from hasel_wheel_mpc.ident.data import read_bag
@@ -140,14 +141,7 @@ def run(label: str, effects: dict, cid: str | None, values: dict[str, float]) ->
         line += f" (the gains drawn: std {np.std(gains):.4f} as drawn)"
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'}"
                        for r in res.rounds for e in r)
-    for e in SEL.near_misses(res):
-        fitted = C.BY_ID[e.effects[-1]].describe(
-            [e.fit.values[p.name] for p in C.BY_ID[e.effects[-1]].params])
-        refits += (f"; near miss {'+'.join(e.effects)}: "
-                   + ", ".join(f"{k} {v:.4g}" for k, v in fitted.items() if isinstance(v, float))
-                   + f", held-out simulation error {res.final.sim_heldout_rmse:.4f} -> "
-                   f"{e.sim_heldout_rmse:.4f} rad/s "
-                   f"({100 * (1 - e.sim_heldout_rmse / res.final.sim_heldout_rmse):.1f} % lower)")
+    refits += "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
     print(f"{line}; refits: {refits or 'none'}; {verdict.upper()}; recorded in {t_rec:.0f} s, "
           f"identified in {dt:.0f} s", flush=True)
     return verdict

@@ -41,6 +41,7 @@ import numpy as np
 from hasel_wheel_mpc.ident import candidates as C
 from hasel_wheel_mpc.ident import fit as F
 from hasel_wheel_mpc.ident import metrics as M
+from hasel_wheel_mpc.ident import report as R
 from hasel_wheel_mpc.ident import residual as RES
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
@@ -136,6 +137,7 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str,
         floor = f" (true model {ref:.4f}: x{before / ref:.2f} smaller than before)"
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
                        f"(Wald p {e.wald_p:.1e})" for r in res.rounds for e in r)
+    refits += "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
     print(f"{label}, {tag}: chosen {res.chosen or 'none'} ({verdict}); "
           f"{est}; held-out simulation error {before:.4f} -> {after:.4f} rad/s "
           f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
@@ -333,7 +335,8 @@ def run_outside_library() -> None:
               f"simulation error {res.nominal.sim_heldout_rmse:.4f} -> "
               f"{res.final.sim_heldout_rmse:.4f} rad/s; {drift}; other signatures "
               f"{others or 'none'}; unconfirmed {len(res.unconfirmed)}"
-              + "".join(f"; refused {b}" for b in beside) + f"; {dt:.0f} s")
+              + "".join(f"; refused {b}" for b in beside)
+              + "".join(f"; near miss {m}" for m in R.near_miss_texts(res)) + f"; {dt:.0f} s")
     print(f"look-alikes outside the library: {len(runs) - wrong} of {len(runs)} right")
 
 
@@ -386,6 +389,7 @@ def run_restarted() -> None:
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'}"
                        + ("" if e.accepted else f" ({e.reason.split('refused: ')[-1]})")
                        for r in res.rounds for e in r)
+    refits += "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
     print(f"gain spread std 0.15, 3 x 34 s, plant seed 4, up to 2 effects: chosen "
           f"{res.chosen or 'none'}; final model: {res.final.reason}; held-out simulation error "
           f"{res.nominal.sim_heldout_rmse:.4f} -> {res.final.sim_heldout_rmse:.4f} rad/s; "
@@ -408,6 +412,7 @@ def run_realistic() -> None:
                                            if isinstance(x, float)))
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
                        f"({e.reason})" for r in res.rounds for e in r)
+    refits += "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
     unexplained = "; ".join(s.text for s in res.diagnostics_after.signatures) or "none"
     print(f"all effects of the realistic plant at once (REALISTIC, 5 x 60 s, up to 4 effects): "
           f"chosen {res.chosen or 'none'}: {'; '.join(found)}; tau_f "

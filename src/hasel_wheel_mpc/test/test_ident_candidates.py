@@ -250,7 +250,8 @@ def test_near_misses_are_the_refits_only_the_free_run_bar_turned_away():
 
 
 def test_a_near_miss_reads_in_the_report_as_it_was_measured():
-    from hasel_wheel_mpc.ident.report import _near_miss, near_miss_text
+    import types
+    from hasel_wheel_mpc.ident.report import _near_miss, near_miss_text, near_miss_texts
     final = _held_out(("com_offset",), 0.300e-3, 0.0415, accepted=True)
     e = _held_out(("com_offset", "rise_lag"), 0.290e-3, 0.0376,
                   values={"tau": 0.03883, "A": 0.001, "B": 0.002})
@@ -260,3 +261,8 @@ def test_a_near_miss_reads_in_the_report_as_it_was_measured():
     assert near_miss_text(m) == ("rise_lag (time_constant_s 0.03883): Wald p 0.0e+00, held-out "
                                  "simulation error 0.0415 -> 0.0376 rad/s (9.4 % lower; the "
                                  "bar is 10 %)")
+    # the lines the command and the benchmarks print: the same text, from the search itself
+    ident = types.SimpleNamespace(final=final, rounds=[[final], [e]], min_gain=0.10)
+    assert near_miss_texts(ident) == [near_miss_text(m)]
+    ident.min_gain = 0.05                 # a 9.4 % cut passes a 5 % bar: no near miss
+    assert near_miss_texts(ident) == []

@@ -213,6 +213,13 @@ def near_miss_text(m: dict) -> str:
             f"is {100 * m['bar']:.0f} %)")
 
 
+def near_miss_texts(ident: Identification) -> list[str]:
+    """One line per refit :func:`~.select.near_misses` lists for ``ident`` (as the command's
+    summary prints them)."""
+    return [near_miss_text(_near_miss(e, ident.final, ident.min_gain))
+            for e in near_misses(ident)]
+
+
 def _physical_ci(ev: Evaluation, c, x: np.ndarray) -> dict:
     """95 % intervals of the effect's physical values (the scalar ones) by the delta method:
     the fitted parameters' covariance through a finite-difference gradient of ``describe``."""
