@@ -541,3 +541,36 @@ def test_a_reading_error_standing_in_for_an_off_centre_mass_falls_with_speed_spa
     assert stand_in.unit == "span" and K.inconsistent(stand_in)
     assert stand_in.exponent < -0.5 and stand_in.trend_p < 1e-6
     assert "refitted span by span" in K.stand_in_reason(C.BY_ID["angle_eccentricity"], stand_in)
+
+
+def _stalled(tr, seconds: float):
+    """``tr`` followed by ``seconds`` of a wheel at rest with its last pad on (a pad that
+    cannot push it on, as a closed loop on a broken pad ends)."""
+    k = int(np.flatnonzero(tr.q)[-1])               # the last sample with a pad on
+    dt = float(np.median(np.diff(tr.t)))
+    m = int(round(seconds / dt))
+    ext = lambda a, v: np.concatenate([a, np.full(m, v, dtype=a.dtype)])  # noqa: E731
+    return dataclasses.replace(
+        tr, t=np.concatenate([tr.t, tr.t[-1] + dt * np.arange(1, m + 1)]),
+        angle=ext(tr.angle, tr.angle[-1]), q=ext(tr.q, 1), eta=ext(tr.eta, tr.eta[k]),
+        n_a=ext(tr.n_a, tr.n_a[k]), phi_a=ext(tr.phi_a, tr.phi_a[k]),
+        phi_d=ext(tr.phi_d, tr.phi_d[k]))
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_a_trial_that_stalls_for_good_is_halved_as_the_fit_sees_it():
+    # the fits drop a tail at rest (fit.at_rest_trimmed); one trial stalled for 60 s with a
+    # pad on has its "drive" end 60 s later, so halves cut on the whole record put the
+    # second half in the dropped tail: a fit of no samples (a mean of nothing, warned), and
+    # no half to compare.  Cut on what the fit sees, both halves are fitted, the trial's
+    # speed is that of its motion, and the rise lag is the same in both halves
+    trials = S.encoder_trials(RISE, 11)
+    trials[1] = _stalled(trials[1], 60.0)
+    base = WheelParams()
+    eff = (C.BY_ID["rise_lag"],)
+    fit = Problem(trials, base, eff).fit(start={"tau_f": coastdown_friction(trials, base).tau_f})
+    c = K.trial_consistency(trials, base, eff, fit, eff[0])
+    assert np.all(np.isfinite(c.halves))
+    moving = K.driven_speed(F.at_rest_trimmed(trials[1]))
+    assert c.speeds[1] == pytest.approx(moving) and moving > 1.0
+    assert not K.drifts(c)

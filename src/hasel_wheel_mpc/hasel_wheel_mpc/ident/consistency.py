@@ -333,6 +333,12 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
     # each (the compiled simulator releases the GIL), as the folds are
     every = Problem(trials, base, effects, window=window)
     x_all = fit.x0
+    # the trials as the fits see them, a tail at rest trimmed (fit.at_rest_trimmed): the
+    # speeds, spans and halves are taken from these.  A wheel that stalls for good (a closed
+    # loop on a pad too weak to push it on: gain spread of std 0.5, plant seed 3, two of
+    # three runs stalled at 8.4 and 15.6 s of 115) would otherwise have its second half in
+    # the trimmed tail, a fit of no samples (ad hoc, at 287783d)
+    seen = every.trials
 
     def one(j: int) -> FitResult:
         prob = Problem([trials[j]], base, effects, window=window, fixed=held)
@@ -340,8 +346,8 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
 
     with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
         fits = list(pool.map(one, range(len(trials))))
-    units, unit_fits, unit = trials, fits, "trial"
-    spans = speed_units(trials)
+    units, unit_fits, unit = seen, fits, "trial"
+    spans = speed_units(seen)
     if spans:
         # each span weighed alone (``keep``), the samples before it still run the model (a
         # retained charge builds up from the trial's start), from its trial's fit, the
@@ -373,8 +379,8 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
                       np.array(sd), pooled * scale, chi2, dof, float(stats.chi2.sf(chi2, dof)),
                       speeds, exponent, exponent_sd, trend_p, unit)
     if spans:       # the halves below are halves of the trials, sized by the trials' fits
-        u = np.array(_estimates(trials, fits, params)[0]) / scale
-        con.halves_trials = [tr.name for tr in trials]
+        u = np.array(_estimates(seen, fits, params)[0]) / scale
+        con.halves_trials = [tr.name for tr in seen]
     norm = float(np.linalg.norm(pooled))
     if norm > 0.0:
         d = pooled / norm
@@ -388,7 +394,7 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
             return prob.fit(start=res.values, x0=res.x0,
                             max_nfev=MAX_NFEV)
 
-        cuts = [_halves(tr) for tr in trials]
+        cuts = [_halves(tr) for tr in seen]
         jobs = [(j, span) for j, c in enumerate(cuts) if c is not None for span in c[0]]
         with ThreadPoolExecutor(max_workers=max(threads, 1)) as pool:
             done = dict(zip(jobs, pool.map(half, jobs)))
