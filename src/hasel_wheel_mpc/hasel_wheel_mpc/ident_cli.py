@@ -31,7 +31,7 @@ def _ids(text: str | None) -> list[str] | None:
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, write the report, print a summary."""
     from .ident.identifiability import identifiability    # (matplotlib only when needed)
-    from .ident.report import near_miss_text, write_report
+    from .ident.report import near_miss_text, stall_texts, write_report
     from .ident.select import identify
 
     t0 = time.perf_counter()
@@ -70,6 +70,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     for e in data["effects"]:
         print(f"  {e['id']}: " + ", ".join(f"{k} = {v:.4g}" for k, v in e["physical"].items()
                                              if isinstance(v, float)))
+    for text in stall_texts(data):
+        print(f"  stalled: {text}")
     for m in data["near_misses"]:
         print(f"  near miss, refused at the free-run bar: {near_miss_text(m)}")
     for u in data["unexplained"]:

@@ -641,6 +641,47 @@ def at_rest_trimmed(tr: Trial, band: float = REST_BAND) -> Trial:
     return tr.slice(0, last, tr.name)
 
 
+@dataclass
+class RestTail:
+    """The tail of a trial at rest that the fits leave out (:func:`at_rest_trimmed`)."""
+
+    from_s: float            # [s] the trial's time of its first sample at rest (own clock)
+    seconds: float           # [s] how long it lasts, to the end of the record
+    scheduled_share: float   # [1] the share of its samples with a pad scheduled (n_a >= 0)
+    hv_share: float          # [1] the share of its samples with a pad on (q = 1)
+    pad: int | None          # the pad scheduled for the most of those samples (0..15)
+
+    @property
+    def stalled(self) -> bool:
+        """The wheel stopped for good while still driven: a pad scheduled for most of a rest
+        of 1 s or more (a wheel at rest after a coast-down has none).  With the pad on it is
+        too weak to push the wheel on; with it off, the wheel stopped short of its switching
+        angle and waits for it."""
+        return self.seconds >= 1.0 and self.scheduled_share > 0.5
+
+    def text(self, trial: str) -> str:
+        """The stall in words (see :attr:`stalled`)."""
+        how = (f"pad {self.pad} on for {100 * self.hv_share:.0f} % of it" if self.hv_share > 0.5
+               else f"pad {self.pad} scheduled but off (short of its switching angle)")
+        return (f"{trial}: the wheel stopped at {self.from_s:.2f} s while driven and stayed at "
+                f"rest for {self.seconds:.1f} s to the end, {how}; the fit leaves that rest "
+                f"out.  A wheel that stalls while driven points to a pad broken or far weaker "
+                f"than the others: this one, or the one before it, which left the wheel where "
+                f"this one cannot move it.")
+
+
+def rest_tail(tr: Trial) -> RestTail | None:
+    """The tail of ``tr`` that :func:`at_rest_trimmed` drops, or None when it keeps all."""
+    n = at_rest_trimmed(tr).t.shape[0]
+    if n == tr.t.shape[0]:
+        return None
+    scheduled = tr.n_a[n:] >= 0
+    pads = (tr.eta_unwrapped[n:][scheduled] % N_ACTUATORS).astype(np.int64)
+    return RestTail(float(tr.t[n]), float(tr.t[-1] - tr.t[n - 1]), float(scheduled.mean()),
+                    float(tr.q[n:].astype(bool).mean()),
+                    int(np.bincount(pads).argmax()) if pads.size else None)
+
+
 def autocorrelation_inflation(r: np.ndarray, starts: np.ndarray, used: np.ndarray,
                               max_lag: int = 30, centred: bool = True) -> float:
     """1 + 2 sum_{l=1..max_lag} rho_l: how much a correlated residual widens the intervals.

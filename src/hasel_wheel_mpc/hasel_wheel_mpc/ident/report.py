@@ -5,7 +5,12 @@ and ``model.yaml``, the identified model that the sim and the MPC load.
 
 =========================  ===============================================================
 schema                     "hasel_wheel.identification/1"
-trials                     [{name, source, duration_s, samples, activations, coasts}]
+trials                     [{name, source, duration_s, samples, activations, coasts,
+                            rest_tail}]; rest_tail: the rest at the end that the fits leave
+                            out, {from_s, seconds, scheduled_share, hv_share, pad, stalled,
+                            text} (stalled: the wheel stopped for good while driven, a pad
+                            scheduled for most of a rest of 1 s or more; text: it in
+                            words), null when none
 friction                   {tau_f_N_m, ci95_N_m: [lo, hi], segments} or null (no coast-down)
 nominal                    {parameters: {name: {value, unit, ci95: [lo, hi]}},
                             wheel: {sigma1..sigma6, tau_f, brake_gain}}
@@ -149,7 +154,7 @@ from ..paper import TABLE_III
 from .metrics import TrialMetrics, pooled_rmse
 from .prediction import PREDICTION_SPAN
 from .residual import Diagnostics
-from .fit import effect_wald_p
+from .fit import effect_wald_p, rest_tail
 from .select import Evaluation, Identification, near_misses
 
 SCHEMA = "hasel_wheel.identification/1"
@@ -211,6 +216,22 @@ def near_miss_text(m: dict) -> str:
             f"{_fmt(m['heldout_simulation_rmse_rad_s'], '.4f')} rad/s "
             f"({_fmt(None if m['cut'] is None else 100 * m['cut'], '.1f')} % lower; the bar "
             f"is {100 * m['bar']:.0f} %)")
+
+
+def _rest_tail(tr) -> dict | None:
+    """report.json's ``rest_tail`` of a trial (:func:`~.fit.rest_tail`)."""
+    rt = rest_tail(tr)
+    if rt is None:
+        return None
+    return {"from_s": rt.from_s, "seconds": rt.seconds, "scheduled_share": rt.scheduled_share,
+            "hv_share": rt.hv_share, "pad": rt.pad, "stalled": rt.stalled,
+            "text": rt.text(tr.name)}
+
+
+def stall_texts(data: dict) -> list[str]:
+    """The stalls of report.json's trials in words, one per trial that stalled."""
+    return [t["rest_tail"]["text"] for t in data["trials"]
+            if t["rest_tail"] is not None and t["rest_tail"]["stalled"]]
 
 
 def near_miss_texts(ident: Identification) -> list[str]:
@@ -339,7 +360,8 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
         "numerics": blas_in_use(),
         "trials": [{"name": tr.name, "source": tr.source, "duration_s": _num(tr.duration),
                     "samples": int(tr.t.shape[0]), "activations": len(tr.activations),
-                    "coasts": len(find_coasts(tr))} for tr in ident.trials],
+                    "coasts": len(find_coasts(tr)), "rest_tail": _rest_tail(tr)}
+                   for tr in ident.trials],
         "friction": None if fr is None else {"tau_f_N_m": fr.tau_f,
                                              "ci95_N_m": list(fr.ci95), "segments": fr.segments},
         "nominal": {"parameters": _params(ident.nominal, nominal_names),
@@ -451,6 +473,8 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
     L: list[str] = ["# Identification report", ""]
     L += [f"{len(ident.trials)} trials, {sum(t['duration_s'] for t in data['trials']):.0f} s in "
           f"all; held-out validation by trial over {len(ident.folds)} folds.", ""]
+    L += [f"**Stalled:** {text}" for text in stall_texts(data)]
+    L += [""] if stall_texts(data) else []
     blas = ", ".join(f"{b['library']} {b['version']} ({b['kernels']} kernels)"
                      for b in data["numerics"]["blas"]) or "not known (no threadpoolctl)"
     L += [f"Linear algebra: {blas}.", ""]
