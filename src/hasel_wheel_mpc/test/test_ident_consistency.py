@@ -543,10 +543,11 @@ def test_a_reading_error_standing_in_for_an_off_centre_mass_falls_with_speed_spa
     assert "refitted span by span" in K.stand_in_reason(C.BY_ID["angle_eccentricity"], stand_in)
 
 
-def _stalled(tr, seconds: float, on: bool = True):
-    """``tr`` followed by ``seconds`` of a wheel at rest with its last pad scheduled, and on
-    unless ``on`` is False (a pad that cannot push it on, or one whose switching angle the
-    wheel stopped short of, as closed loops on a broken pad end)."""
+def _stalled(tr, seconds: float, on: bool = True, target: int | None = None):
+    """``tr`` followed by ``seconds`` of a wheel at rest with its last pad in contact and
+    scheduled (or the command's ``target`` pad scheduled), and on unless ``on`` is False (a
+    pad that cannot push it on, or one whose switching angle the wheel stopped short of, as
+    closed loops on a broken pad end)."""
     k = int(np.flatnonzero(tr.q)[-1])               # the last sample with a pad on
     dt = float(np.median(np.diff(tr.t)))
     m = int(round(seconds / dt))
@@ -554,7 +555,7 @@ def _stalled(tr, seconds: float, on: bool = True):
     return dataclasses.replace(
         tr, t=np.concatenate([tr.t, tr.t[-1] + dt * np.arange(1, m + 1)]),
         angle=ext(tr.angle, tr.angle[-1]), q=ext(tr.q, int(on)), eta=ext(tr.eta, tr.eta[k]),
-        n_a=ext(tr.n_a, tr.n_a[k]), phi_a=ext(tr.phi_a, tr.phi_a[k]),
+        n_a=ext(tr.n_a, tr.n_a[k] if target is None else target), phi_a=ext(tr.phi_a, tr.phi_a[k]),
         phi_d=ext(tr.phi_d, tr.phi_d[k]))
 
 
@@ -580,23 +581,30 @@ def test_a_trial_that_stalls_for_good_is_halved_as_the_fit_sees_it():
 def test_a_stall_is_told_from_the_rest_after_a_coast_down():
     from hasel_wheel_mpc.ident.report import _rest_tail, stall_texts
     tr = S.encoder_trials(RISE, 11)[1]
-    pad = int(tr.eta_unwrapped[np.flatnonzero(tr.q)[-1]] % 16)
-    # the plant's trial ends in a coast-down to rest: nothing scheduled, no stall
+    k = np.flatnonzero(tr.q)[-1]
+    pad, target = int(tr.eta_unwrapped[k] % 16), (int(tr.n_a[k]) + 1) % 16
+    # the plant's trial ends in a coast-down to rest: nothing scheduled, no stall, no words
     plain = F.rest_tail(tr)
-    assert plain is None or (plain.scheduled_share == 0.0 and not plain.stalled)
-    moving_until = F.at_rest_trimmed(tr).t[-1]
+    assert plain is None or (plain.scheduled_share == 0.0 and not plain.stalled
+                             and _rest_tail(tr)["text"] is None)
+    moving_until = F.at_rest_trimmed(tr).t[-1]       # the last sample the fits keep
     for on in (True, False):
-        rt = F.rest_tail(_stalled(tr, 60.0, on=on))
+        st = _stalled(tr, 60.0, on=on, target=None if on else target)
+        rt = F.rest_tail(st)
         assert rt.stalled and rt.pad == pad
-        # the rest began where the coast-down's did, and runs 60 s longer
-        assert rt.from_s == pytest.approx(moving_until, abs=0.01)
-        assert rt.seconds == pytest.approx(tr.t[-1] - moving_until + 60.0, abs=0.02)
-        # the 60 s with the pad scheduled are most of the rest; on for those, or off
+        # the rest began where the coast-down's did, and runs to the end, 60 s longer
+        assert rt.from_s == moving_until
+        assert rt.from_s + rt.seconds == pytest.approx(st.t[-1], abs=1e-9)
+        # the 60 s with a pad scheduled are most of the samples left out; on for those, or off
         assert rt.scheduled_share > 0.95
         assert rt.hv_share == (pytest.approx(rt.scheduled_share) if on else 0.0)
-        text = stall_texts({"trials": [{"rest_tail": _rest_tail(_stalled(tr, 60.0, on=on))}]})
-        assert len(text) == 1 and f"pad {pad} " in text[0]
-        assert ("on for" in text[0]) is on and ("short of its switching angle" in text[0]) is not on
+        text = stall_texts({"trials": [{"rest_tail": _rest_tail(st)}]})
+        assert len(text) == 1
+        if on:
+            assert f"pad {pad} on for" in text[0]
+        else:                          # the scheduled pad is the command's, not the one in contact
+            assert rt.target == target != pad
+            assert f"pad {target} scheduled but off" in text[0] and f"pad {pad} in contact" in text[0]
     # a rest under 1 s with a pad scheduled is not a stall
     assert not F.rest_tail(_stalled(tr, 0.5)).stalled
     assert stall_texts({"trials": [{"rest_tail": None}, {"rest_tail": _rest_tail(tr)}]}) == []

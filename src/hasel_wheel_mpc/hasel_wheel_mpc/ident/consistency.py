@@ -334,10 +334,10 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
     every = Problem(trials, base, effects, window=window)
     x_all = fit.x0
     # the trials as the fits see them, a tail at rest trimmed (fit.at_rest_trimmed): the
-    # speeds, spans and halves are taken from these.  A wheel that stalls for good (a closed
-    # loop on a pad too weak to push it on: gain spread of std 0.5, plant seed 3, two of
-    # three runs stalled at 8.4 and 15.6 s of 115) would otherwise have its second half in
-    # the trimmed tail, a fit of no samples (ad hoc, at 287783d)
+    # speeds, spans and halves are taken from these.  A wheel that stalls for good while
+    # driven (closed loops on a gain spread of std 0.5, plant seed 3: all three runs stalled,
+    # at 21.2, 8.4 and 15.6 s of 115) would otherwise have its second half in the trimmed
+    # tail, a fit of no samples (ad hoc, at 287783d: two of the three runs' halves)
     seen = every.trials
 
     def one(j: int) -> FitResult:

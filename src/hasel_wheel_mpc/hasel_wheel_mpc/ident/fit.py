@@ -643,13 +643,17 @@ def at_rest_trimmed(tr: Trial, band: float = REST_BAND) -> Trial:
 
 @dataclass
 class RestTail:
-    """The tail of a trial at rest that the fits leave out (:func:`at_rest_trimmed`)."""
+    """The rest at the end of a trial: from its first sample at rest, the last one the fits
+    keep, to the end of the record; the samples after that first one are left out
+    (:func:`at_rest_trimmed`)."""
 
-    from_s: float            # [s] the trial's time of its first sample at rest (own clock)
-    seconds: float           # [s] how long it lasts, to the end of the record
-    scheduled_share: float   # [1] the share of its samples with a pad scheduled (n_a >= 0)
-    hv_share: float          # [1] the share of its samples with a pad on (q = 1)
-    pad: int | None          # the pad scheduled for the most of those samples (0..15)
+    from_s: float            # [s] the time of its first sample at rest (the trial's clock)
+    seconds: float           # [s] from there to the end of the record
+    scheduled_share: float   # [1] the share of the samples left out with a pad scheduled
+    hv_share: float          # [1] the share of the samples left out with a pad on (q = 1)
+    pad: int | None          # the pad in contact (eta, 0..15) for the most of those samples
+    target: int | None       # the command's target pad (n_a, 0..15) for the most of the
+                             # scheduled ones; None when none is scheduled
 
     @property
     def stalled(self) -> bool:
@@ -662,7 +666,8 @@ class RestTail:
     def text(self, trial: str) -> str:
         """The stall in words (see :attr:`stalled`)."""
         how = (f"pad {self.pad} on for {100 * self.hv_share:.0f} % of it" if self.hv_share > 0.5
-               else f"pad {self.pad} scheduled but off (short of its switching angle)")
+               else f"pad {self.target} scheduled but off, short of its switching angle (pad "
+                    f"{self.pad} in contact)")
         return (f"{trial}: the wheel stopped at {self.from_s:.2f} s while driven and stayed at "
                 f"rest for {self.seconds:.1f} s to the end, {how}; the fit leaves that rest "
                 f"out.  A wheel that stalls while driven points to a pad broken or far weaker "
@@ -670,16 +675,22 @@ class RestTail:
                 f"this one cannot move it.")
 
 
+def _most(values: np.ndarray) -> int | None:
+    """The most frequent of ``values`` (pad indices, taken modulo 16); None when empty."""
+    v = (values.astype(np.int64) % N_ACTUATORS)
+    return int(np.bincount(v).argmax()) if v.size else None
+
+
 def rest_tail(tr: Trial) -> RestTail | None:
-    """The tail of ``tr`` that :func:`at_rest_trimmed` drops, or None when it keeps all."""
+    """The rest at the end of ``tr`` (see :class:`RestTail`), or None when the fits keep every
+    sample (no rest at the end, the whole record at rest, or too little left before it)."""
     n = at_rest_trimmed(tr).t.shape[0]
     if n == tr.t.shape[0]:
         return None
     scheduled = tr.n_a[n:] >= 0
-    pads = (tr.eta_unwrapped[n:][scheduled] % N_ACTUATORS).astype(np.int64)
-    return RestTail(float(tr.t[n]), float(tr.t[-1] - tr.t[n - 1]), float(scheduled.mean()),
-                    float(tr.q[n:].astype(bool).mean()),
-                    int(np.bincount(pads).argmax()) if pads.size else None)
+    return RestTail(float(tr.t[n - 1]), float(tr.t[-1] - tr.t[n - 1]), float(scheduled.mean()),
+                    float(tr.q[n:].astype(bool).mean()), _most(tr.eta_unwrapped[n:]),
+                    _most(tr.n_a[n:][scheduled]))
 
 
 def autocorrelation_inflation(r: np.ndarray, starts: np.ndarray, used: np.ndarray,

@@ -6,11 +6,17 @@ and ``model.yaml``, the identified model that the sim and the MPC load.
 =========================  ===============================================================
 schema                     "hasel_wheel.identification/1"
 trials                     [{name, source, duration_s, samples, activations, coasts,
-                            rest_tail}]; rest_tail: the rest at the end that the fits leave
-                            out, {from_s, seconds, scheduled_share, hv_share, pad, stalled,
-                            text} (stalled: the wheel stopped for good while driven, a pad
-                            scheduled for most of a rest of 1 s or more; text: it in
-                            words), null when none
+                            rest_tail}]; rest_tail: the rest at the end of the record, whose
+                            samples after its first the fits leave out (fit.RestTail):
+                            {from_s [s, the trial's clock] its first sample, seconds [s] to
+                            the end, scheduled_share and hv_share [1] of the samples left
+                            out with a pad scheduled and on, pad (0..15) the one in contact
+                            and target (0..15) the command's for most of them, null when
+                            none, stalled: the wheel stopped for good while driven, a pad
+                            scheduled for most of a rest of 1 s or more, text: the stall in
+                            words, null unless stalled}; null when the fits keep every
+                            sample (no rest at the end, the whole record at rest, or too
+                            little before it)
 friction                   {tau_f_N_m, ci95_N_m: [lo, hi], segments} or null (no coast-down)
 nominal                    {parameters: {name: {value, unit, ci95: [lo, hi]}},
                             wheel: {sigma1..sigma6, tau_f, brake_gain}}
@@ -224,8 +230,8 @@ def _rest_tail(tr) -> dict | None:
     if rt is None:
         return None
     return {"from_s": rt.from_s, "seconds": rt.seconds, "scheduled_share": rt.scheduled_share,
-            "hv_share": rt.hv_share, "pad": rt.pad, "stalled": rt.stalled,
-            "text": rt.text(tr.name)}
+            "hv_share": rt.hv_share, "pad": rt.pad, "target": rt.target,
+            "stalled": rt.stalled, "text": rt.text(tr.name) if rt.stalled else None}
 
 
 def stall_texts(data: dict) -> list[str]:
