@@ -45,6 +45,7 @@ from hasel_wheel_mpc.ident import report as R
 from hasel_wheel_mpc.ident import residual as RES
 from hasel_wheel_mpc.ident import select as SEL
 from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_mpc.ident import verdict as V
 from hasel_wheel_mpc.ident.consistency import caution, leans
 from hasel_wheel_mpc.model_compare import compare_controllers
 from hasel_wheel_mpc.observer import ObserverConfig
@@ -129,18 +130,24 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str,
     if cid in res.chosen and cid in ("gain_spread", "platform_periodic", "com_offset"):
         d = C.BY_ID[cid].describe([v[p.name] for p in C.BY_ID[cid].params])
         est = ", ".join(f"{k} {x:.4g}" for k, x in d.items() if isinstance(x, float))
-    verdict = "right" if res.chosen == (cid,) else "expected " + cid
     before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
-    floor = ""
+    floor, ref = "", None
     if label in TRUE_VALUES:
         ref = true_model_error(trials, cid, TRUE_VALUES[label])
         floor = f" (true model {ref:.4f}: x{before / ref:.2f} smaller than before)"
+    verdict = V.verdict(res.chosen, cid, before, ref)
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
                        f"(Wald p {e.wald_p:.1e})" for r in res.rounds for e in r)
-    refits += "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
+    refits += near(res)
     print(f"{label}, {tag}: chosen {res.chosen or 'none'} ({verdict}); "
           f"{est}; held-out simulation error {before:.4f} -> {after:.4f} rad/s "
           f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
+
+
+def near(res: SEL.Identification) -> str:
+    """The near misses of ``res`` (report.near_miss_texts) as "; near miss ..." each; every
+    case's line ends with them."""
+    return "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
 
 
 def _identify_short(effects: dict, seed: int, library=C.LIBRARY, analyse: bool = False):
@@ -152,7 +159,7 @@ def _identify_short(effects: dict, seed: int, library=C.LIBRARY, analyse: bool =
     res = SEL.identify(trials, k_folds=3, library=library, analyse_residuals=analyse)
     dt = time.perf_counter() - t0
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
-                       f"({e.reason.split(';')[0]})" for r in res.rounds for e in r)
+                       f"({e.reason.split(';')[0]})" for r in res.rounds for e in r) + near(res)
     return trials, res, dt, refits
 
 
@@ -211,7 +218,7 @@ def run_two_and_outside() -> None:
               f"{res.nominal.sim_heldout_rmse:.4f} -> {res.final.sim_heldout_rmse:.4f} rad/s;"
               f" mean autocorrelation over 0.2 s {d.correlated_share:.4f} (white sd "
               f"{d.correlated_share_sd:.4f}); lags outside the 99 % band "
-              f"{100 * d.whiteness_outside:.0f} %; unexplained: {sigs}; {dt:.0f} s")
+              f"{100 * d.whiteness_outside:.0f} %; unexplained: {sigs}{near(res)}; {dt:.0f} s")
 
 
 def run_sensor() -> None:
@@ -253,7 +260,8 @@ def run_sensor() -> None:
         verdict = ("right" if ok else "WRONG") if amp == 0.005 else "no verdict (not tested)"
         print(f"  its candidate left out: {verdict}; chosen "
               f"{res.chosen or 'none'}; refused as stand-ins: "
-              f"{' / '.join(stand) or 'none'}; unexplained: {sigs or 'none'}; {dt:.0f} s")
+              f"{' / '.join(stand) or 'none'}; unexplained: {sigs or 'none'}{near(res)}; "
+              f"{dt:.0f} s")
 
 
 def run_outside_library() -> None:
@@ -277,7 +285,7 @@ def run_outside_library() -> None:
             line += (f" (factors: r = {np.corrcoef(np.log(f), np.log(truth))[0, 1]:.3f} with the "
                      f"plant's gains, std {np.std(f):.3f} against {np.std(truth):.3f}, largest "
                      f"difference {np.max(np.abs(f - truth)):.3f})")
-    print(line + f"; unconfirmed: {[u.axis for u in res.unconfirmed]}; {dt:.0f} s")
+    print(line + f"; unconfirmed: {[u.axis for u in res.unconfirmed]}{near(res)}; {dt:.0f} s")
     look = {"rise lag 40 ms": ({"rise_lag": {"enabled": True,
                                              "time_constant": {"value": 0.04, "unit": "s"}}},
                                "rise_lag", (11, 12, 13), 1e6),
@@ -336,7 +344,7 @@ def run_outside_library() -> None:
               f"{res.final.sim_heldout_rmse:.4f} rad/s; {drift}; other signatures "
               f"{others or 'none'}; unconfirmed {len(res.unconfirmed)}"
               + "".join(f"; refused {b}" for b in beside)
-              + "".join(f"; near miss {m}" for m in R.near_miss_texts(res)) + f"; {dt:.0f} s")
+              + near(res) + f"; {dt:.0f} s")
     print(f"look-alikes outside the library: {len(runs) - wrong} of {len(runs)} right")
 
 
@@ -389,7 +397,7 @@ def run_restarted() -> None:
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'}"
                        + ("" if e.accepted else f" ({e.reason.split('refused: ')[-1]})")
                        for r in res.rounds for e in r)
-    refits += "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
+    refits += near(res)
     print(f"gain spread std 0.15, 3 x 34 s, plant seed 4, up to 2 effects: chosen "
           f"{res.chosen or 'none'}; final model: {res.final.reason}; held-out simulation error "
           f"{res.nominal.sim_heldout_rmse:.4f} -> {res.final.sim_heldout_rmse:.4f} rad/s; "
@@ -412,7 +420,7 @@ def run_realistic() -> None:
                                            if isinstance(x, float)))
     refits = "; ".join(f"{'+'.join(e.effects)} {'accepted' if e.accepted else 'refused'} "
                        f"({e.reason})" for r in res.rounds for e in r)
-    refits += "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
+    refits += near(res)
     unexplained = "; ".join(s.text for s in res.diagnostics_after.signatures) or "none"
     print(f"all effects of the realistic plant at once (REALISTIC, 5 x 60 s, up to 4 effects): "
           f"chosen {res.chosen or 'none'}: {'; '.join(found)}; tau_f "

@@ -149,9 +149,7 @@ def run(draw: Draw, specs, defects: bool) -> str:
     dt = time.perf_counter() - t0
     before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
     cid = BANDS[draw.effect][0] if draw.effect != "none" else None
-    line = (f"{draw.label()}, plant seed {draw.seed}: chosen {', '.join(res.chosen) or 'none'} "
-            f"-> {V.verdict(res.chosen, cid)}; held-out simulation error {before:.4f} -> "
-            f"{after:.4f} rad/s (x{before / after:.2f})")
+    line = f"held-out simulation error {before:.4f} -> {after:.4f} rad/s (x{before / after:.2f})"
     for c in res.chosen:
         line += f"; {c}: {estimate(c, res.final.fit.values, draw, gains)}"
     true = None
@@ -160,8 +158,11 @@ def run(draw: Draw, specs, defects: bool) -> str:
         true = M.model_error(trials, base, (C.BY_ID[cid],), candidate_truth(draw, gains, base))
         line += f"; true model {true:.4f} (x{before / true:.2f}"
         line += ", below the floor)" if V.below_floor(before, true) else ")"
-    print(line + f"; {dt:.0f} s", flush=True)
-    return V.verdict(res.chosen, cid, before, true)
+    # one verdict, printed and counted (a miss below the floor says so in both)
+    verdict = V.verdict(res.chosen, cid, before, true)
+    print(f"{draw.label()}, plant seed {draw.seed}: chosen {', '.join(res.chosen) or 'none'} "
+          f"-> {verdict}; {line}; {dt:.0f} s", flush=True)
+    return verdict
 
 
 def main() -> None:

@@ -585,16 +585,16 @@ def test_a_stall_is_told_from_the_rest_after_a_coast_down():
     pad, target = int(tr.eta_unwrapped[k] % 16), (int(tr.n_a[k]) + 1) % 16
     # the plant's trial ends in a coast-down to rest: nothing scheduled, no stall, no words
     plain = F.rest_tail(tr)
-    assert plain is None or (plain.scheduled_share == 0.0 and not plain.stalled
-                             and _rest_tail(tr)["text"] is None)
+    assert plain is not None and plain.scheduled_share == 0.0 and not plain.stalled
+    assert _rest_tail(tr)["text"] is None
     moving_until = F.at_rest_trimmed(tr).t[-1]       # the last sample the fits keep
     for on in (True, False):
         st = _stalled(tr, 60.0, on=on, target=None if on else target)
         rt = F.rest_tail(st)
         assert rt.stalled and rt.pad == pad
         # the rest began where the coast-down's did, and runs to the end, 60 s longer
-        assert rt.from_s == moving_until
-        assert rt.from_s + rt.seconds == pytest.approx(st.t[-1], abs=1e-9)
+        assert rt.from_s == moving_until - tr.t[0]
+        assert rt.from_s + rt.seconds == pytest.approx(st.t[-1] - st.t[0], abs=1e-9)
         # the 60 s with a pad scheduled are most of the samples left out; on for those, or off
         assert rt.scheduled_share > 0.95
         assert rt.hv_share == (pytest.approx(rt.scheduled_share) if on else 0.0)
@@ -604,7 +604,12 @@ def test_a_stall_is_told_from_the_rest_after_a_coast_down():
             assert f"pad {pad} on for" in text[0]
         else:                          # the scheduled pad is the command's, not the one in contact
             assert rt.target == target != pad
-            assert f"pad {target} scheduled but off" in text[0] and f"pad {pad} in contact" in text[0]
+            assert f"pad {target} scheduled but off" in text[0]
+            assert f"pad {pad} in contact" in text[0]
+    # a bag's trial runs on the device's clock: the stall is told from the trial's start
+    late = dataclasses.replace(_stalled(tr, 60.0), t=_stalled(tr, 60.0).t + 5234.0)
+    assert F.rest_tail(late).from_s == pytest.approx(moving_until - tr.t[0], abs=1e-6)
+    assert f"stopped {moving_until - tr.t[0]:.2f} s into the trial" in _rest_tail(late)["text"]
     # a rest under 1 s with a pad scheduled is not a stall
     assert not F.rest_tail(_stalled(tr, 0.5)).stalled
     assert stall_texts({"trials": [{"rest_tail": None}, {"rest_tail": _rest_tail(tr)}]}) == []

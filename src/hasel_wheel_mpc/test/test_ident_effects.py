@@ -721,8 +721,8 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     # a coast-down to rest, with nothing scheduled, so none is a stall
     for t in on_disk["trials"]:
         rt = t["rest_tail"]
-        assert rt is None or (rt["scheduled_share"] == 0.0 and rt["stalled"] is False
-                              and rt["text"] is None)
+        assert rt is not None and rt["scheduled_share"] == 0.0 and rt["stalled"] is False
+        assert rt["text"] is None
     assert "Stalled" not in (tmp_path / "report.md").read_text()
     # the model with the right effect converges: here it stops at the limit of 100 and
     # converges as it runs on from there (select.identify), and the report counts both runs

@@ -85,8 +85,9 @@ def run_configs(config: PlantConfig, runs: int, *, same_wheel: bool) -> list[Pla
     gains are not drawn, so run 0 of one wheel draws other noise than a plant of
     ``config`` itself, which draws its gains first.)
     """
-    if runs < 1:
-        raise ParameterError(f"runs = {runs}: expected at least 1 recording")
+    if isinstance(runs, bool) or not isinstance(runs, int) or runs < 1:
+        raise ParameterError(f"runs = {runs!r}: expected a whole number of recordings, at "
+                             f"least 1")
     if same_wheel:
         gains = config.effects.extensions(np.random.default_rng(config.seed)).gains
         config = replace(config, effects=replace(config.effects, gains=tuple(gains)))

@@ -135,8 +135,10 @@ def test_runs_of_one_wheel_share_its_gains_and_draw_their_own_noise():
     plants = [Plant(config=c, xi2=2.0) for c in one]
     readings = {tuple(p.step().angle for _ in range(300)) for p in plants}
     assert len(readings) == 3                       # same wheel, same start, its own noise
-    with pytest.raises(ParameterError, match="runs = 0: expected at least 1"):
-        run_configs(cfg, 0, same_wheel=True)
+    for bad in (0, 2.5, True):
+        with pytest.raises(ParameterError, match=f"runs = {bad!r}: expected a whole number of "
+                                                 f"recordings, at least 1"):
+            run_configs(cfg, bad, same_wheel=True)
 
 
 def _plant(effects, seed=1):

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Callable
 
 import numpy as np
@@ -132,7 +133,7 @@ def _spread_gains(x) -> tuple[float, ...]:
     return tuple(float(v) for v in np.exp(np.concatenate(([-np.sum(x)], x))))
 
 
-def spread_values(gains) -> tuple[float, dict[str, float]]:
+def spread_values(gains: Sequence[float] | np.ndarray) -> tuple[float, dict[str, float]]:
     """A wheel's actuator gains (16,) [1] in ``gain_spread``'s terms: (their geometric mean
     [1], which scales the force law's peak, and the candidate's log-gains {"d1".."d15"}
     [1] of the gains over that mean).  The inverse of the candidate's gains."""

@@ -647,7 +647,7 @@ class RestTail:
     keep, to the end of the record; the samples after that first one are left out
     (:func:`at_rest_trimmed`)."""
 
-    from_s: float            # [s] the time of its first sample at rest (the trial's clock)
+    from_s: float            # [s] its first sample at rest, after the trial's first sample
     seconds: float           # [s] from there to the end of the record
     scheduled_share: float   # [1] the share of the samples left out with a pad scheduled
     hv_share: float          # [1] the share of the samples left out with a pad on (q = 1)
@@ -668,8 +668,9 @@ class RestTail:
         how = (f"pad {self.pad} on for {100 * self.hv_share:.0f} % of it" if self.hv_share > 0.5
                else f"pad {self.target} scheduled but off, short of its switching angle (pad "
                     f"{self.pad} in contact)")
-        return (f"{trial}: the wheel stopped at {self.from_s:.2f} s while driven and stayed at "
-                f"rest for {self.seconds:.1f} s to the end, {how}; the fit leaves that rest "
+        return (f"{trial}: the wheel stopped {self.from_s:.2f} s into the trial, while driven, "
+                f"and stayed at rest for {self.seconds:.1f} s to the end, {how}; the fit "
+                f"leaves that rest "
                 f"out.  A wheel that stalls while driven points to a pad broken or far weaker "
                 f"than the others: this one, or the one before it, which left the wheel where "
                 f"this one cannot move it.")
@@ -688,7 +689,8 @@ def rest_tail(tr: Trial) -> RestTail | None:
     if n == tr.t.shape[0]:
         return None
     scheduled = tr.n_a[n:] >= 0
-    return RestTail(float(tr.t[n - 1]), float(tr.t[-1] - tr.t[n - 1]), float(scheduled.mean()),
+    return RestTail(float(tr.t[n - 1] - tr.t[0]), float(tr.t[-1] - tr.t[n - 1]),
+                    float(scheduled.mean()),
                     float(tr.q[n:].astype(bool).mean()), _most(tr.eta_unwrapped[n:]),
                     _most(tr.n_a[n:][scheduled]))
 

@@ -8,7 +8,7 @@ schema                     "hasel_wheel.identification/1"
 trials                     [{name, source, duration_s, samples, activations, coasts,
                             rest_tail}]; rest_tail: the rest at the end of the record, whose
                             samples after its first the fits leave out (fit.RestTail):
-                            {from_s [s, the trial's clock] its first sample, seconds [s] to
+                            {from_s [s, after the trial's first sample] its first sample, seconds [s] to
                             the end, scheduled_share and hv_share [1] of the samples left
                             out with a pad scheduled and on, pad (0..15) the one in contact
                             and target (0..15) the command's for most of them, null when
@@ -479,8 +479,10 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
     L: list[str] = ["# Identification report", ""]
     L += [f"{len(ident.trials)} trials, {sum(t['duration_s'] for t in data['trials']):.0f} s in "
           f"all; held-out validation by trial over {len(ident.folds)} folds.", ""]
-    L += [f"**Stalled:** {text}" for text in stall_texts(data)]
-    L += [""] if stall_texts(data) else []
+    stalls = stall_texts(data)
+    if stalls:
+        L += ["**Stalled** (the wheel stopped for good while driven):", ""]
+        L += [f"* {text}" for text in stalls] + [""]
     blas = ", ".join(f"{b['library']} {b['version']} ({b['kernels']} kernels)"
                      for b in data["numerics"]["blas"]) or "not known (no threadpoolctl)"
     L += [f"Linear algebra: {blas}.", ""]

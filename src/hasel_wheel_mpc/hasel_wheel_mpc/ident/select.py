@@ -162,6 +162,11 @@ from .threads import with_one_blas_thread
 
 
 
+#: An added effect must differ from "no effect" with a Wald p under this [1] (the texts
+#: of the reasons and the report say "1e-6").
+WALD_P = 1e-6
+
+
 @dataclass
 class Evaluation:
     """One model (nominal + ``effects``) fitted on all trials and cross-validated."""
@@ -396,7 +401,7 @@ def near_misses(ident: Identification) -> list[Evaluation]:
     if not ident.rounds or any(e.effects == cur.effects for e in ident.rounds[-1]):
         return []
     out = [e for e in ident.rounds[-1]
-           if not e.accepted and e.plausible and e.wald_p < 1e-6
+           if not e.accepted and e.plausible and e.wald_p < WALD_P
            and math.isfinite(e.heldout_rmse) and e.heldout_rmse < cur.heldout_rmse
            and pooled_rmse(e.sim_fitted) < pooled_rmse(cur.sim_fitted)
            and cur.sim_heldout_rmse * (1.0 - min_gain) < e.sim_heldout_rmse
@@ -600,7 +605,8 @@ def judge(ev: Evaluation, added: tuple[Candidate, ...], current: Evaluation, min
     gain = 1.0 - ev.heldout_rmse / current.heldout_rmse
     sim_gain = 1.0 - ev.sim_heldout_rmse / current.sim_heldout_rmse
     ev.plausible = odd is None
-    ev.accepted = bool(gain > 0.0 and sim_gain >= min_gain and ev.wald_p < 1e-6 and odd is None)
+    ev.accepted = bool(gain > 0.0 and sim_gain >= min_gain and ev.wald_p < WALD_P
+                       and odd is None)
     if math.isnan(ev.heldout_rmse):           # not cross-validated (never accepted)
         fitted = pooled_rmse(ev.sim_fitted)
         before = pooled_rmse(current.sim_fitted)
