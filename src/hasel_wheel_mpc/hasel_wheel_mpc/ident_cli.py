@@ -21,7 +21,7 @@ from hasel_wheel_sim.plant import PlantConfig, load_plant_config
 
 from .ident import candidates as C
 from .ident import synthetic as S
-from .ident.data import TrialError, load_trials, write_csv
+from .ident.data import TrialError, load_trials, separate_wheels, write_csv
 
 
 def _ids(text: str | None) -> list[str] | None:
@@ -41,6 +41,10 @@ def cmd_identify(args: argparse.Namespace) -> int:
     except (TrialError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    for path in args.inputs:
+        note = separate_wheels(path) if Path(path).suffix.lower() != ".csv" else None
+        if note:
+            print(f"warning: {note}", file=sys.stderr)
     base = load_wheel_params(args.wheel_params) if args.wheel_params else WheelParams()
     print(f"{len(trials)} trials, {sum(t.duration for t in trials):.0f} s; candidates: "
           f"{', '.join(c.id for c in lib)}")

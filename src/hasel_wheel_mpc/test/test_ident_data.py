@@ -235,6 +235,23 @@ def test_bag_from_the_embedded_runner_gives_the_same_activations(tmp_path):
     assert all(b.eta == a.eta + 1 for a, b in zip(on, on[1:]))
 
 
+@pytest.mark.parametrize("config, warned", [
+    ({"wheels": "3", "same_wheel": "false"}, True),
+    ({"wheels": "3"}, True),                  # a bag from before --same-wheel: separate wheels
+    ({"wheels": "3", "same_wheel": "true"}, False),
+    ({"wheels": "1", "same_wheel": "false"}, False),
+    ({}, False),                              # not the demo's bag
+])
+def test_a_bag_of_separate_wheels_is_told_apart_from_runs_of_one(tmp_path, config, warned):
+    rec = Recorder(tmp_path / "bag", custom_data={"tool": "hasel_wheel demo", **config})
+    rec.close()
+    note = D.separate_wheels(tmp_path / "bag")
+    if warned:
+        assert "records 3 separate wheels" in note and "--same-wheel" in note
+    else:
+        assert note is None
+
+
 def test_a_closed_loop_bag_gives_the_start_command_to_the_pads_it_drives(tmp_path):
     # the runner starts the wheel with its own command (sequence 0) before the MPC decides;
     # with viscous drag (seed 3) the first switch-on falls on the sample where the MPC's first

@@ -471,6 +471,26 @@ def read_bag(path: str | Path) -> list[Trial]:
     return out
 
 
+def separate_wheels(path: str | Path) -> str | None:
+    """A warning when the bag at ``path`` records several wheels rather than runs of one
+    (``hasel_wheel demo --wheels N`` without ``--same-wheel``, read from its recorded
+    configuration: ``wheels`` > 1 and ``same_wheel`` not "true"; bags from before that flag
+    had only separate wheels), else None.  Each such wheel draws its own actuator gains, and
+    the identification fits one wheel to all its trials."""
+    from hasel_wheel_driver import bagio
+
+    cfg = bagio.bag_configuration(path)
+    try:
+        wheels = int(cfg.get("wheels", "1"))
+    except ValueError:
+        return None
+    if wheels < 2 or cfg.get("same_wheel", "false") == "true":
+        return None
+    return (f"{path} records {wheels} separate wheels (hasel_wheel demo --wheels {wheels} "
+            f"without --same-wheel), each with actuator gains of its own, and they are "
+            f"identified as one wheel; record runs of one wheel with --same-wheel")
+
+
 def load_trials(paths: list[str | Path]) -> list[Trial]:
     """Trials from CSV files, bag directories or .mcap files (a bag may hold several)."""
     out: list[Trial] = []
