@@ -9,8 +9,8 @@ import os
 from pathlib import Path
 
 # before any test module imports numpy: the package pins OpenBLAS's kernels, so that the
-# identification tests choose the same on every x86-64 machine (hasel_wheel_mpc.numerics)
-import hasel_wheel_mpc  # noqa: F401
+# identification tests choose the same on every x86-64 machine (hasel_wheel_ident.numerics)
+import hasel_wheel_ident  # noqa: F401
 
 _WORKER = os.environ.get("PYTEST_XDIST_WORKER")
 if _WORKER and "HASEL_WHEEL_JIT_CACHE" not in os.environ:

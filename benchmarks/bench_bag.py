@@ -22,9 +22,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.bagio import BagWriter
-from hasel_wheel_driver.samples import Command, TelemetrySample
+from hasel_wheel_common import samples
+from hasel_wheel_common import topics
+from hasel_wheel_bag.bagio import BagWriter
+from hasel_wheel_common.samples import Command, TelemetrySample
 
 NS = "/wheel0"
 PROFILE = (1.0, 1.5, 2.0, 2.5, 2.6, 2.0)
@@ -33,10 +34,10 @@ TOOL = r"""
 import resource, sys, time
 t0 = time.perf_counter()
 if sys.argv[1] == "info":
-    from hasel_wheel_driver.baginfo import bag_info
+    from hasel_wheel_bag.info import bag_info
     n = bag_info(sys.argv[2]).messages
 else:
-    from hasel_wheel_mpc.bag_metrics import bag_metrics
+    from hasel_wheel_bringup.bag_metrics import bag_metrics
     n = bag_metrics(sys.argv[2])[0].telemetry_samples
 print(time.perf_counter() - t0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, n)
 """

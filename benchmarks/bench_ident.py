@@ -16,10 +16,10 @@ from __future__ import annotations
 
 import time
 
-from hasel_wheel_mpc.ident import candidates as C
-from hasel_wheel_mpc.ident import fit as F
-from hasel_wheel_mpc.ident import select as SEL
-from hasel_wheel_mpc.ident import synthetic as S
+from hasel_wheel_ident import candidates as C
+from hasel_wheel_ident import fit as F
+from hasel_wheel_ident import select as SEL
+from hasel_wheel_ident import synthetic as S
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import PlantConfig

@@ -28,18 +28,18 @@ import tempfile
 import time
 from pathlib import Path
 
-import hasel_wheel_mpc  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
+import hasel_wheel_ident  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
 import numpy as np
 
 from hasel_wheel_mpc.closed_loop import FIG11_DURATION
-from hasel_wheel_mpc.closed_loop_demo import VARIANTS, run_variants
-from hasel_wheel_mpc.ident import candidates as C
-from hasel_wheel_mpc.ident import fit as F
-from hasel_wheel_mpc.ident import metrics as M
-from hasel_wheel_mpc.ident import report as R
-from hasel_wheel_mpc.ident import select as SEL
-from hasel_wheel_mpc.ident import verdict as V
-from hasel_wheel_mpc.ident.data import read_bag
+from hasel_wheel_bringup.demo import VARIANTS, run_variants
+from hasel_wheel_ident import candidates as C
+from hasel_wheel_ident import fit as F
+from hasel_wheel_ident import metrics as M
+from hasel_wheel_ident import report as R
+from hasel_wheel_ident import select as SEL
+from hasel_wheel_ident import verdict as V
+from hasel_wheel_ident.data import read_bag
 from hasel_wheel_mpc.recorder import Recorder
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
@@ -116,7 +116,7 @@ def estimate(cid: str, fit_values: dict[str, float], truth: dict[str, float]) ->
 def run(label: str, effects: dict, cid: str | None, values: dict[str, float]) -> str:
     """Record and identify one case (``effects`` on the plant; ``cid`` the candidate that
     should be named, ``values`` its parameters at the plant's); print its line, return the
-    verdict (:func:`~hasel_wheel_mpc.ident.verdict.verdict`)."""
+    verdict (:func:`~hasel_wheel_ident.verdict.verdict`)."""
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / "bag"
         t0 = time.perf_counter()

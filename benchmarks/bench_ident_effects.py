@@ -35,19 +35,19 @@ import math
 import re
 import time
 
-import hasel_wheel_mpc  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
+import hasel_wheel_ident  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
 import numpy as np
 
-from hasel_wheel_mpc.ident import candidates as C
-from hasel_wheel_mpc.ident import fit as F
-from hasel_wheel_mpc.ident import metrics as M
-from hasel_wheel_mpc.ident import report as R
-from hasel_wheel_mpc.ident import residual as RES
-from hasel_wheel_mpc.ident import select as SEL
-from hasel_wheel_mpc.ident import synthetic as S
-from hasel_wheel_mpc.ident import verdict as V
-from hasel_wheel_mpc.ident.consistency import caution, leans
-from hasel_wheel_mpc.model_compare import compare_controllers
+from hasel_wheel_ident import candidates as C
+from hasel_wheel_ident import fit as F
+from hasel_wheel_ident import metrics as M
+from hasel_wheel_ident import report as R
+from hasel_wheel_ident import residual as RES
+from hasel_wheel_ident import select as SEL
+from hasel_wheel_ident import synthetic as S
+from hasel_wheel_ident import verdict as V
+from hasel_wheel_ident.consistency import caution, leans
+from hasel_wheel_ident.model_compare import compare_controllers
 from hasel_wheel_mpc.observer import ObserverConfig
 from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
 from hasel_wheel_sim.model import Extensions

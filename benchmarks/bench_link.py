@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hasel_wheel_driver import protocol as P
+from hasel_wheel_common import protocol as P
 from hasel_wheel_driver.link import DriverCore, LinkConfig
 from hasel_wheel_sim.virtual_teensy import DeviceProcess
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import time
 
-import hasel_wheel_mpc  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
+import hasel_wheel_ident  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
 import numpy as np
 
 from hasel_wheel_mpc.closed_loop import run_closed_loop, segment_metrics

@@ -30,15 +30,15 @@ import math
 import time
 from dataclasses import dataclass
 
-import hasel_wheel_mpc  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
+import hasel_wheel_ident  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
 import numpy as np
 
-from hasel_wheel_mpc.ident import candidates as C
-from hasel_wheel_mpc.ident import fit as F
-from hasel_wheel_mpc.ident import metrics as M
-from hasel_wheel_mpc.ident import select as SEL
-from hasel_wheel_mpc.ident import synthetic as S
-from hasel_wheel_mpc.ident import verdict as V
+from hasel_wheel_ident import candidates as C
+from hasel_wheel_ident import fit as F
+from hasel_wheel_ident import metrics as M
+from hasel_wheel_ident import select as SEL
+from hasel_wheel_ident import synthetic as S
+from hasel_wheel_ident import verdict as V
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import PlantConfig

@@ -1,4 +1,4 @@
-"""Observer, disturbance estimator, MPC, identification and the embedded runner for the HASEL wheel."""
+"""Observer, disturbance estimator, MPC, the control core and its nodes, and the embedded runner for the HASEL wheel."""
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -14,25 +14,19 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*.yaml")),
-        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     # lower bounds only, so that Ubuntu 24.04 / ROS 2 Jazzy system packages satisfy them
-    install_requires=["setuptools", "numpy>=1.24", "scipy>=1.10", "PyYAML>=5.4",
-                      "matplotlib>=3.6", "hasel_wheel_driver", "hasel_wheel_sim"],
-    extras_require={"threads": ["threadpoolctl>=3.1"],   # optional: one BLAS thread in fits
-                    "test": ["pytest"]},      # colcon test runs pytest (not unittest)
+    install_requires=["setuptools", "numpy>=1.24", "PyYAML>=5.4", "hasel_wheel_common", "hasel_wheel_bag", "hasel_wheel_sim"],
+    extras_require={"test": ["pytest"]},      # colcon test runs pytest (not unittest)
     zip_safe=False,
     maintainer="HASEL wheel developers",
     maintainer_email="dev@hasel-wheel.invalid",
-    description="Observer, disturbance estimator, MPC, identification and the embedded runner for the HASEL wheel.",
+    description="Observer, disturbance estimator, MPC, the control core and its nodes, and the embedded runner for the HASEL wheel.",
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "hasel_wheel = hasel_wheel_mpc.cli:main",
-            "hasel_wheel_bag = hasel_wheel_mpc.bag_cli:main",
             "observer_node = hasel_wheel_mpc.observer_node:main",
             "mpc_node = hasel_wheel_mpc.mpc_node:main",
-            "trial_node = hasel_wheel_mpc.trial_node:main",
         ],
     },
 )

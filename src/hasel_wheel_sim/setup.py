@@ -17,7 +17,7 @@ setup(
         ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     # lower bounds only, so that Ubuntu 24.04 / ROS 2 Jazzy system packages satisfy them
-    install_requires=["setuptools", "numpy>=1.24", "PyYAML>=5.4", "hasel_wheel_driver"],
+    install_requires=["setuptools", "numpy>=1.24", "PyYAML>=5.4", "hasel_wheel_common"],
     extras_require={"fast": ["numba>=0.58"],   # compiled model core (falls back to Python)
                     "test": ["pytest"]},       # colcon test runs pytest (not unittest)
     zip_safe=False,

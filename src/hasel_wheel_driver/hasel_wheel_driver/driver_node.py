@@ -16,9 +16,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
-from hasel_wheel_driver import samples, topics
+from hasel_wheel_common import samples
+from hasel_wheel_common import topics
 from hasel_wheel_driver.link import DriverCore, LinkConfig
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param,
+from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param,
                                                  publish_status, qos_profile, run_node,
                                                  text_param)
 

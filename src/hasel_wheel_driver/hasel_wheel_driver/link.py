@@ -16,9 +16,9 @@ from typing import Callable
 
 import serial
 
-from . import protocol as P
-from .samples import ENCODER_COUNT as COUNT
-from .samples import Command, TelemetrySample
+from hasel_wheel_common import protocol as P
+from hasel_wheel_common.samples import ENCODER_COUNT as COUNT
+from hasel_wheel_common.samples import Command, TelemetrySample
 
 
 @dataclass(frozen=True)

@@ -12,7 +12,7 @@ import threading
 import time
 from typing import Sequence
 
-from .link import DriverCore, LinkConfig
+from hasel_wheel_driver.link import DriverCore, LinkConfig
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -5,9 +5,9 @@ import tty
 
 import pytest
 
-from hasel_wheel_driver import protocol as P
+from hasel_wheel_common import protocol as P
 from hasel_wheel_driver.link import DriverCore, LinkConfig
-from hasel_wheel_driver.samples import Command
+from hasel_wheel_common.samples import Command
 
 
 @pytest.mark.parametrize("cmd, match", [

@@ -13,18 +13,18 @@ from typing import Callable
 
 import numpy as np
 
-from hasel_wheel_driver import samples
-from hasel_wheel_driver.samples import Command
+from hasel_wheel_common import samples
+from hasel_wheel_common.samples import Command
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.wheel import TICK
 
-from .controller import START_ANGLES, ControllerConfig, SpeedController
-from .disturbance import TRACKING_GAIN
-from .mpc import MpcConfig
-from .observer import ObserverConfig
-from .segments import SegmentMetrics, SegmentTracker  # noqa: F401  (SegmentMetrics: re-export)
+from hasel_wheel_mpc.controller import START_ANGLES, ControllerConfig, SpeedController
+from hasel_wheel_mpc.disturbance import TRACKING_GAIN
+from hasel_wheel_mpc.mpc import MpcConfig
+from hasel_wheel_mpc.observer import ObserverConfig
+from hasel_wheel_mpc.segments import SegmentMetrics, SegmentTracker  # noqa: F401  (SegmentMetrics: re-export)
 
 D = math.radians
 
@@ -74,7 +74,7 @@ def run_closed_loop(profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
     'observer' or 'finite_difference'.  With a ``recorder`` (recorder.Recorder) every sample,
     estimate, decision and reference change is written under namespace ``ns``, and the
     controller's configuration as ``<ns>/controller.yaml`` in the bag's configuration (what
-    :func:`~hasel_wheel_mpc.replay.replay_bag` reads).  ``clock`` [s] is the MPC's clock for
+    :func:`~hasel_wheel_bringup.replay.replay_bag` reads).  ``clock`` [s] is the MPC's clock for
     its deadline (default wall time; a constant clock makes the run independent of the
     machine's speed).
     """

@@ -3,8 +3,8 @@
 :class:`SpeedController` takes device samples one at a time (``step(sample, reference)``)
 and answers with the estimate and, at decision points, the MPC's decision.  The closed loop
 (:func:`~hasel_wheel_mpc.closed_loop.run_closed_loop`) feeds it from the plant; the bag
-replay (:mod:`~hasel_wheel_mpc.replay`) feeds it from a recording.  Both hand it the sample
-as a node receives it (:func:`hasel_wheel_driver.samples.as_received`), so a recorded run
+replay (:mod:`~hasel_wheel_bringup.replay`) feeds it from a recording.  Both hand it the sample
+as a node receives it (:func:`hasel_wheel_common.samples.as_received`), so a recorded run
 can be re-computed exactly.
 
 :class:`ControllerConfig` is everything that decides what the controller does (its model,
@@ -22,15 +22,15 @@ from typing import Any, Callable, Mapping, NamedTuple
 import numpy as np
 import yaml
 
-from hasel_wheel_driver.samples import PadEdges, TelemetrySample
+from hasel_wheel_common.samples import PadEdges, TelemetrySample
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.model_file import extensions_to_yaml_dict, model_from_mapping
 from hasel_wheel_sim.params import ParameterError, WheelParams
 from hasel_wheel_sim.wheel import TICK
 
-from .disturbance import TRACKING_GAIN, IntegralEstimator
-from .mpc import Decision, Mpc, MpcConfig, next_pad
-from .observer import Estimate, Observer, ObserverConfig
+from hasel_wheel_mpc.disturbance import TRACKING_GAIN, IntegralEstimator
+from hasel_wheel_mpc.mpc import Decision, Mpc, MpcConfig, next_pad
+from hasel_wheel_mpc.observer import Estimate, Observer, ObserverConfig
 
 D = math.radians
 #: The command that starts a wheel (sequence 1), and the angles [rad] the first pad runs with.

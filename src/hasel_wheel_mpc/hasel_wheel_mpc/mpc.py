@@ -65,7 +65,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hasel_wheel_driver.samples import Command
+from hasel_wheel_common.samples import Command
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import advance
 from hasel_wheel_sim.jit import jit
@@ -73,7 +73,7 @@ from hasel_wheel_sim.model import SECTOR, Extensions, reading_param_vector
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.wheel import TICK, initial_state
 
-from .observer import fold_pivot, set_disturbance
+from hasel_wheel_mpc.observer import fold_pivot, set_disturbance
 
 D = math.radians
 

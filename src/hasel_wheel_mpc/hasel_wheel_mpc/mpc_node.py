@@ -27,15 +27,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
-from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param, int_param,
+from hasel_wheel_common import samples
+from hasel_wheel_common import topics
+from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param, int_param,
                                                  publish_status, qos_profile, run_node,
                                                  text_param)
 from hasel_wheel_sim.model import SECTOR
 
-from .controller import MPC_PARAMS, REDECIDE_MIN_TIME, decide_at, decision_point
-from .mpc import Mpc, MpcConfig, gc_paused, next_pad
-from .node_model import declare_controller_model
+from hasel_wheel_mpc.controller import MPC_PARAMS, REDECIDE_MIN_TIME, decide_at, decision_point
+from hasel_wheel_mpc.mpc import Mpc, MpcConfig, gc_paused, next_pad
+from hasel_wheel_mpc.node_model import declare_controller_model
 
 D = math.radians
 #: Parameters that are MpcConfig fields of the same name (changeable at run time).

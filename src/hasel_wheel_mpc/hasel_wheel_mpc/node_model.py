@@ -2,7 +2,7 @@
 it declares ROS parameters; the loading itself is :func:`hasel_wheel_sim.model_file.controller_model`)."""
 from __future__ import annotations
 
-from hasel_wheel_driver.nodes.ros_common import text_param
+from hasel_wheel_common.nodes.ros_common import text_param
 from hasel_wheel_sim.jit import HAVE_NUMBA
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.model_file import controller_model, describe_model

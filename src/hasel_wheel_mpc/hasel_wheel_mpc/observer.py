@@ -25,8 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hasel_wheel_driver.samples import ENCODER_COUNT as COUNT
-from hasel_wheel_driver.samples import PadEdges, TelemetrySample
+from hasel_wheel_common.samples import ENCODER_COUNT as COUNT
+from hasel_wheel_common.samples import PadEdges, TelemetrySample
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import rk4
 from hasel_wheel_sim.model import SECTOR, Extensions, reading_param_vector

@@ -23,15 +23,16 @@ from hasel_wheel_msgs.msg import (ActuationCommand, HybridStateEstimate, MpcStat
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
-from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param,
+from hasel_wheel_common import samples
+from hasel_wheel_common import topics
+from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param,
                                                  publish_status, qos_profile, run_node,
                                                  text_param)
 from hasel_wheel_sim.params import ParameterError, WheelParams
 
-from .disturbance import TRACKING_GAIN, IntegralEstimator
-from .node_model import declare_controller_model
-from .observer import Observer, ObserverConfig
+from hasel_wheel_mpc.disturbance import TRACKING_GAIN, IntegralEstimator
+from hasel_wheel_mpc.node_model import declare_controller_model
+from hasel_wheel_mpc.observer import Observer, ObserverConfig
 
 ESTIMATOR_MODES = ("tracking", "paper")
 

@@ -12,9 +12,10 @@ from typing import Iterable, Mapping
 
 import yaml
 
-from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.bagio import BagWriter
-from hasel_wheel_driver.samples import Command, TelemetrySample
+from hasel_wheel_common import samples
+from hasel_wheel_common import topics
+from hasel_wheel_bag.bagio import BagWriter
+from hasel_wheel_common.samples import Command, TelemetrySample
 from hasel_wheel_sim.wheel import HybridState
 
 
@@ -35,7 +36,8 @@ def package_versions() -> str:
     installed workspace can say when the git revision is unknown)."""
     from importlib import metadata
     out = []
-    for name in ("hasel_wheel_driver", "hasel_wheel_sim", "hasel_wheel_mpc"):
+    for name in ("hasel_wheel_common", "hasel_wheel_bag", "hasel_wheel_driver", "hasel_wheel_sim",
+                 "hasel_wheel_mpc", "hasel_wheel_ident", "hasel_wheel_bringup"):
         try:
             out.append(f"{name} {metadata.version(name)}")
         except metadata.PackageNotFoundError:

@@ -29,8 +29,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .model import N_ACTUATORS, Extensions
-from .params import FieldSpec, ParameterError, read_valued_mapping
+from hasel_wheel_sim.model import N_ACTUATORS, Extensions
+from hasel_wheel_sim.params import FieldSpec, ParameterError, read_valued_mapping
 
 INF = math.inf
 

@@ -17,9 +17,9 @@ import math
 
 import numpy as np
 
-from . import layout as L
-from .jit import jit, jit_inline, jit_kernel, jit_parallel, prange
-from .model import (N_ACTUATORS, SECTOR, acceleration, angle_at_reading, angle_reading,
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.jit import jit, jit_inline, jit_kernel, jit_parallel, prange
+from hasel_wheel_sim.model import (N_ACTUATORS, SECTOR, acceleration, angle_at_reading, angle_reading,
                     contact_at_switch_on, sector_of, unwrap_target)
 
 #: Tolerance of event location on the wheel angle [rad].

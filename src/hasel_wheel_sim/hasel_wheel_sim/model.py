@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import layout as L
-from .jit import jit, jit_inline
-from .params import FieldSpec, ParameterError, WheelParams, check_value
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.jit import jit, jit_inline
+from hasel_wheel_sim.params import FieldSpec, ParameterError, WheelParams, check_value
 
 #: Angle between adjacent actuator pads [rad].
 SECTOR = math.pi / 8.0

@@ -32,8 +32,8 @@ from typing import Any, Mapping
 
 import yaml
 
-from .model import EXTENSION_FIELDS, GAIN_SPEC, N_ACTUATORS, Extensions
-from .params import (ParameterError, WheelParams, load_wheel_params, load_yaml_file,
+from hasel_wheel_sim.model import EXTENSION_FIELDS, GAIN_SPEC, N_ACTUATORS, Extensions
+from hasel_wheel_sim.params import (ParameterError, WheelParams, load_wheel_params, load_yaml_file,
                      read_valued_mapping, wheel_params_from_mapping)
 
 #: Top-level sections of a model file.

@@ -16,14 +16,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from hasel_wheel_driver.samples import ENCODER_COUNT, ENCODER_COUNTS, Command, TelemetrySample
+from hasel_wheel_common.samples import ENCODER_COUNT, ENCODER_COUNTS, Command, TelemetrySample
 
-from . import layout as L
-from .effects import EffectsConfig, effects_from_mapping
-from .model import Extensions, angle_reading
-from .model_file import load_model
-from .params import ParameterError, WheelParams, load_wheel_params, load_yaml_file
-from .wheel import TICK, HybridWheel, SwitchMode
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.effects import EffectsConfig, effects_from_mapping
+from hasel_wheel_sim.model import Extensions, angle_reading
+from hasel_wheel_sim.model_file import load_model
+from hasel_wheel_sim.params import ParameterError, WheelParams, load_wheel_params, load_yaml_file
+from hasel_wheel_sim.wheel import TICK, HybridWheel, SwitchMode
 
 COUNT = ENCODER_COUNT  # one encoder count [rad]
 HV_SUPPLY_V = 9000.0                    # HV converter output while HV is enabled [V]

@@ -25,8 +25,9 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
-from hasel_wheel_driver import samples, topics
-from hasel_wheel_driver.nodes.ros_common import (create_publishers, fill, float_param,
+from hasel_wheel_common import samples
+from hasel_wheel_common import topics
+from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param,
                                                  publish_status, qos_profile, run_node,
                                                  int_param, text_param)
 from hasel_wheel_sim.plant import load_plant_model

@@ -10,11 +10,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from hasel_wheel_driver.samples import Command, TelemetrySample
+from hasel_wheel_common.samples import Command, TelemetrySample
 
-from .params import WheelParams
-from .plant import Plant, PlantConfig
-from .wheel import TICK, CommandError, HybridState, validate_command
+from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.plant import Plant, PlantConfig
+from hasel_wheel_sim.wheel import TICK, CommandError, HybridState, validate_command
 
 #: At most this many ticks per call; beyond it the sim falls behind the wall clock (counted).
 MAX_TICKS_PER_CALL = 60

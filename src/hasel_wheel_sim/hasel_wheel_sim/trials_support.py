@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import layout as L
-from .model import Extensions
-from .params import WheelParams
-from .wheel import TICK, HybridWheel, SwitchMode
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.model import Extensions
+from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.wheel import TICK, HybridWheel, SwitchMode
 
 
 def open_loop_speed(params: WheelParams, ext: Extensions, phi_a: float, seconds: float,
@@ -36,7 +36,7 @@ def braking_fall_time(params: WheelParams, brake: bool = True, w0: float = 2.6, 
     With ``brake`` a braking input (III-D) is sent at every switch-on, decided from the contact
     sector as the controller does; without it the wheel coasts on friction alone.
     """
-    from .model import braking_input
+    from hasel_wheel_sim.model import braking_input
 
     w = HybridWheel(params, mode=mode, xi2=w0)
     if brake:

@@ -28,13 +28,13 @@ from pathlib import Path
 
 import numpy as np
 
-from hasel_wheel_driver import protocol as P
+from hasel_wheel_common import protocol as P
 
-from . import layout as L
-from .integrator import advance
-from .model import SECTOR, angle_reading
-from .plant import COUNT, Plant
-from .wheel import TICK
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.integrator import advance
+from hasel_wheel_sim.model import SECTOR, angle_reading
+from hasel_wheel_sim.plant import COUNT, Plant
+from hasel_wheel_sim.wheel import TICK
 
 
 class Firmware:
@@ -473,7 +473,7 @@ class DeviceProcess:
                  time_scale: float = 1.0, faults: LinkFaults | None = None) -> None:
         import multiprocessing as mp
 
-        from .plant import PlantConfig
+        from hasel_wheel_sim.plant import PlantConfig
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self.link = Path(link)

@@ -12,10 +12,10 @@ from typing import Literal
 
 import numpy as np
 
-from . import layout as L
-from .integrator import advance
-from .model import N_ACTUATORS, SECTOR, Extensions, param_vector
-from .params import WheelParams
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.integrator import advance
+from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, Extensions, param_vector
+from hasel_wheel_sim.params import WheelParams
 
 #: The firmware / paper control period [s].
 TICK = 1.0 / 300.0

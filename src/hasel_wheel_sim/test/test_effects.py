@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_driver.samples import Command
+from hasel_wheel_common.samples import Command
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
 from hasel_wheel_sim.model import Extensions

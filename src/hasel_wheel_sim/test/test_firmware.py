@@ -4,7 +4,7 @@ import struct
 
 import pytest
 
-from hasel_wheel_driver import protocol as P
+from hasel_wheel_common import protocol as P
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import SECTOR
 from hasel_wheel_sim.plant import Plant, PlantConfig

@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from hasel_wheel_driver.samples import Command
+from hasel_wheel_common.samples import Command
 from hasel_wheel_sim.sim_runtime import MAX_TICKS_PER_CALL, SimRuntime
 from hasel_wheel_sim.wheel import TICK
 

@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from hasel_wheel_driver import protocol as P
+from hasel_wheel_common import protocol as P
 from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.virtual_teensy import TX_BUFFER_BYTES, Firmware, VirtualTeensy
 
