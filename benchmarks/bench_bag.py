@@ -24,7 +24,7 @@ from pathlib import Path
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagWriter
+from hasel_wheel_bag.writer import BagWriter
 from hasel_wheel_common.samples import Command, TelemetrySample
 
 NS = "/wheel0"

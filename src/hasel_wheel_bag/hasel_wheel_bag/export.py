@@ -15,7 +15,9 @@ import warnings
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from hasel_wheel_bag.bagio import BagError, read_messages
+from hasel_wheel_bag.layout import BagError
+
+from hasel_wheel_bag.reader import read_messages
 
 
 def flatten(msg: Any, prefix: str = "") -> dict[str, Any]:

@@ -1,7 +1,7 @@
 """What a bag holds, without decoding a message: topics, counts, rates, gaps, duration and
 the run's configuration (no rclpy, no ROS).
 
-One pass over the bag's records (:func:`~.bagio.read_raw`), with memory that does not grow
+One pass over the bag's records (:func:`~.reader.read_raw`), with memory that does not grow
 with the bag's length: per topic a count, the first and last stamp, the largest interval,
 and the count of *gaps*, intervals longer than ``GAP_FACTOR`` times the topic's nominal
 period.  The nominal period is the median of the topic's first ``PERIOD_SAMPLES`` intervals
@@ -17,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hasel_wheel_bag.bagio import bag_configuration, file_finished, mcap_files, read_raw
+from hasel_wheel_bag.layout import file_finished, mcap_files
+
+from hasel_wheel_bag.reader import bag_configuration, read_raw
 
 GAP_FACTOR = 3.0        # an interval this many nominal periods long is a gap
 PERIOD_SAMPLES = 1000   # intervals the nominal period is taken from

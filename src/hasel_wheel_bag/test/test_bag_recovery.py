@@ -8,10 +8,12 @@ import sys
 
 import pytest
 from mcap.writer import Writer
-from mcap_ros2._dynamic import serialize_dynamic
 
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagError, BagWriter, read_messages
+from hasel_wheel_bag.cdr_encode import encoder_for
+from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.reader import read_messages
+from hasel_wheel_bag.writer import BagWriter
 
 #: A recorder of a 60 s run at 300 Hz (telemetry and true state, as the sim writes them),
 #: writing as fast as it can.  After every message that completed a chunk (the file grew) it
@@ -21,7 +23,7 @@ RECORDER = r"""
 import math, os, signal, sys
 at = int(sys.argv[2])
 from hasel_wheel_common import samples, topics
-from hasel_wheel_bag.bagio import BagWriter
+from hasel_wheel_bag.writer import BagWriter
 bag = BagWriter(sys.argv[1], chunk_size=64 * 1024)
 for tp in (topics.TELEMETRY, topics.TRUE_STATE):
     bag.add_topic(topics.qualified(tp, "/w0"), tp.type, tp.qos)
@@ -150,7 +152,7 @@ def test_a_topic_of_an_unknown_type_is_skipped_with_a_warning(tmp_path):
         blob = w.register_channel("/blob", "protobuf", schema)
         ok_schema = w.register_schema("std_msgs/msg/Float64", "ros2msg", b"float64 data")
         ok = w.register_channel("/reference_speed", "cdr", ok_schema)
-        enc = serialize_dynamic("std_msgs/msg/Float64", "float64 data")["std_msgs/msg/Float64"]
+        enc = encoder_for("std_msgs/msg/Float64", "float64 data")
         for k in range(5):
             w.add_message(blob, log_time=k, data=b"\x01\x02", publish_time=k)
             w.add_message(ok, log_time=k, data=enc({"data": float(k)}), publish_time=k)
@@ -178,7 +180,7 @@ def test_configuration_survives_a_reindexed_metadata_yaml(tmp_path):
     still comes from the MCAP file's own records."""
     import yaml
 
-    from hasel_wheel_bag.bagio import bag_configuration
+    from hasel_wheel_bag.reader import bag_configuration
     bag = tmp_path / "r"
     with BagWriter(bag, custom_data={"seed": "7"}) as b:
         b.add_topic("/x", topics.REFERENCE.type, topics.REFERENCE.qos)

@@ -2,7 +2,7 @@
 import pytest
 
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagWriter
+from hasel_wheel_bag.writer import BagWriter
 from hasel_wheel_bag.info import GAP_FACTOR, PERIOD_SAMPLES, bag_info
 
 REF = topics.REFERENCE

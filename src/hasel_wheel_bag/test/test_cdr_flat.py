@@ -4,11 +4,11 @@ import math
 
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from mcap_ros2._dynamic import serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
 from mcap.records import Schema
 
 from hasel_wheel_bag import interfaces
+from hasel_wheel_bag.cdr_encode import encoder_for
 from hasel_wheel_bag.export import flatten
 from hasel_wheel_bag.cdr_flat import flat_decoder
 
@@ -18,7 +18,7 @@ STATE = "hasel_wheel_msgs/msg/HybridStateEstimate"
 
 def _codecs(datatype):
     text = interfaces.full_definition(datatype)
-    encode = serialize_dynamic(datatype, text)[datatype]
+    encode = encoder_for(datatype, text)
     schema = Schema(id=1, name=datatype, encoding="ros2msg", data=text.encode())
     generic = DecoderFactory().decoder_for("cdr", schema)
     return encode, generic, flat_decoder(datatype, text)
@@ -85,7 +85,7 @@ def test_bounded_fields_and_constants_are_told_apart():
     assert flat_decoder("a/msg/B", header + "float64[<=3] v\nfloat64 x\n") is None
     assert flat_decoder("a/msg/C", header + "uint8 MODE_A=1\nuint8 MODE_B = 2\nfloat64 x\n")
     text = header + "uint8 MODE_A=1\nfloat64 x 0.5\n================================================================================\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n================================================================================\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
-    encode = serialize_dynamic("a/msg/C", text)["a/msg/C"]
+    encode = encoder_for("a/msg/C", text)
     m = flat_decoder("a/msg/C", text)(encode({"header": {"stamp": {"sec": 3, "nanosec": 4},
                                                            "frame_id": "w"}, "x": 1.5}))
     assert m.x == 1.5 and m.header.stamp.sec == 3 and m._fields == ("header", "x")

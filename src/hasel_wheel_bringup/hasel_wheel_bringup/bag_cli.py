@@ -27,7 +27,7 @@ from dataclasses import asdict
 
 import yaml
 
-from hasel_wheel_bag.bagio import BagError
+from hasel_wheel_bag.layout import BagError
 from hasel_wheel_bag.export import FORMATS, export
 from hasel_wheel_bag.info import bag_info
 

@@ -25,7 +25,8 @@ import os
 from dataclasses import dataclass, field
 from typing import Callable
 
-from hasel_wheel_bag.bagio import read_messages, topic_names
+from hasel_wheel_bag.layout import topic_names
+from hasel_wheel_bag.reader import read_messages
 
 from hasel_wheel_mpc.segments import SegmentMetrics, SegmentTracker
 

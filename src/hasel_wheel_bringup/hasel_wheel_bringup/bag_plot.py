@@ -33,7 +33,8 @@ import numpy as np  # noqa: E402
 from scipy import signal  # noqa: E402
 
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagError, bag_configuration, read_messages  # noqa: E402
+from hasel_wheel_bag.layout import BagError  # noqa: E402
+from hasel_wheel_bag.reader import bag_configuration, read_messages  # noqa: E402
 from hasel_wheel_sim import layout as L  # noqa: E402
 from hasel_wheel_sim.model import SECTOR, force_law, param_vector  # noqa: E402
 from hasel_wheel_sim.params import WheelParams  # noqa: E402

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagError, read_messages
+from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.reader import read_messages
 
 SUFFIX_ESTIMATE = "/" + topics.STATE_ESTIMATE.name
 SUFFIX_TRUE = "/" + topics.TRUE_STATE.name

@@ -25,7 +25,8 @@ from typing import Any, Callable, Iterable, Mapping
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
 from hasel_wheel_bag.export import flatten
-from hasel_wheel_bag.bagio import BagError, bag_configuration, read_messages
+from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.reader import bag_configuration, read_messages
 
 from hasel_wheel_mpc.controller import ControllerConfig, SpeedController, controller_from_ros_files
 

@@ -2,7 +2,8 @@
 import pytest
 
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagError, BagWriter
+from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.writer import BagWriter
 from hasel_wheel_bringup.cli import main
 
 

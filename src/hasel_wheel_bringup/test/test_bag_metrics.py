@@ -6,7 +6,7 @@ import pytest
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagWriter
+from hasel_wheel_bag.writer import BagWriter
 from hasel_wheel_common.samples import Command
 from hasel_wheel_bringup.bag_metrics import bag_metrics
 from hasel_wheel_bringup.cli import main

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_bag.bagio import BagError
+from hasel_wheel_bag.layout import BagError
 from hasel_wheel_bringup.bag_cli import main as bag_main
 from hasel_wheel_bringup.bag_plot import _collect, force_samples, raw_encoder_speed
 from hasel_wheel_mpc.recorder import Recorder
@@ -66,7 +66,7 @@ def test_the_command_writes_four_pngs_per_wheel(open_loop_bag, tmp_path, capsys)
 
 def test_plot_of_a_bag_without_wheels_is_a_clear_error(tmp_path):
     from hasel_wheel_common import topics
-    from hasel_wheel_bag.bagio import BagWriter
+    from hasel_wheel_bag.writer import BagWriter
     from hasel_wheel_bringup.bag_plot import plot_bag
     with BagWriter(tmp_path / "b") as b:
         b.add_topic("/r", topics.REFERENCE.type, topics.REFERENCE.qos)

@@ -152,7 +152,7 @@ def test_closed_loop_demo_runs_n_wheels_each_under_its_namespace(tmp_path, capsy
     """Two wheels in lockstep on plants with seeds 0 and 1: one bag, each wheel under its own
     namespace with its own controller configuration; both replay exactly, and the noise
     draws differ (different seeds), so their telemetry does too."""
-    from hasel_wheel_bag.bagio import bag_configuration, read_messages
+    from hasel_wheel_bag.reader import bag_configuration, read_messages
     from hasel_wheel_bringup.bag_metrics import bag_metrics
     out = tmp_path / "two"
     assert cli.main(["demo", "--out", str(out), "--hold-scale", "0.08", "--no-compare",
@@ -185,7 +185,7 @@ def test_closed_loop_demo_records_runs_of_one_wheel_or_separate_wheels(tmp_path,
     """On a plant whose only random draw is the gain spread (no encoder noise), two runs of
     one wheel (``--same-wheel``) record the very same telemetry; two wheels, each with the
     gains of its own seed, do not."""
-    from hasel_wheel_bag.bagio import bag_configuration, read_messages
+    from hasel_wheel_bag.reader import bag_configuration, read_messages
     plant = tmp_path / "plant.yaml"
     plant.write_text(yaml.safe_dump({"plant": {"seed": 4, "switching": "tick", "effects": {
         "gain_spread": {"enabled": True, "std": {"value": 0.1, "unit": "1"}},

@@ -8,7 +8,8 @@ import pytest
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagWriter, read_messages
+from hasel_wheel_bag.reader import read_messages
+from hasel_wheel_bag.writer import BagWriter
 from hasel_wheel_mpc.controller import SWITCH_ON, decide_at
 from hasel_wheel_mpc.mpc import Mpc
 from hasel_wheel_mpc.observer import Observer, ObserverConfig

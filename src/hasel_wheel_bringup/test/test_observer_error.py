@@ -5,7 +5,8 @@ import pytest
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagError, BagWriter
+from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.writer import BagWriter
 from hasel_wheel_bringup.bag_cli import main as bag_main
 from hasel_wheel_bringup.observer_error import observer_error
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from hasel_wheel_common import samples
-from hasel_wheel_bag.bagio import BagError, bag_configuration, read_messages
+from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.reader import bag_configuration, read_messages
 from hasel_wheel_bringup.bag_cli import main as bag_main
 from hasel_wheel_sim.params import packaged
 from hasel_wheel_mpc.closed_loop import run_closed_loop

@@ -426,7 +426,7 @@ def read_bag(path: str | Path) -> list[Trial]:
     reports as latched (``last_command_sequence``), else the latest one recorded at or before
     the sample; samples before any command, or with HV off, have n_a = -1.
     """
-    from hasel_wheel_bag import bagio
+    from hasel_wheel_bag import reader
     from hasel_wheel_common import topics
 
     tel: dict[str, list] = {}
@@ -434,7 +434,7 @@ def read_bag(path: str | Path) -> list[Trial]:
     timed: dict[str, list[tuple[float, int, float, float]]] = {}
     tel_suffix = "/" + topics.TELEMETRY.name
     cmd_suffix = "/" + topics.COMMAND.name
-    for topic, _t, m in bagio.read_messages(path):
+    for topic, _t, m in reader.read_messages(path):
         if topic.endswith(tel_suffix):
             ns = topic[: -len(tel_suffix)]
             tel.setdefault(ns, []).append((m.device_time_us * 1e-6, m.angle, m.q, m.eta,
@@ -478,9 +478,9 @@ def separate_wheels(path: str | Path) -> str | None:
     configuration: ``wheels`` > 1 and ``same_wheel`` not "true"; bags from before that flag
     had only separate wheels), else None.  Each such wheel draws its own actuator gains, and
     the identification fits one wheel to all its trials."""
-    from hasel_wheel_bag import bagio
+    from hasel_wheel_bag import reader
 
-    cfg = bagio.bag_configuration(path)
+    cfg = reader.bag_configuration(path)
     try:
         wheels = int(cfg.get("wheels", "1"))
     except ValueError:

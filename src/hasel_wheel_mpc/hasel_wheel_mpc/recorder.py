@@ -14,7 +14,7 @@ import yaml
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagWriter
+from hasel_wheel_bag.writer import BagWriter
 from hasel_wheel_common.samples import Command, TelemetrySample
 from hasel_wheel_sim.wheel import HybridState
 

@@ -8,7 +8,9 @@ from rosbags.highlevel import AnyReader
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
-from hasel_wheel_bag.bagio import BagError, BagWriter, read_messages
+from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.reader import read_messages
+from hasel_wheel_bag.writer import BagWriter
 
 
 def _sample(k):

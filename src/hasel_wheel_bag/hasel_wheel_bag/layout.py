@@ -1,0 +1,103 @@
+"""The rosbag2 layout of a bag: which MCAP files it holds, its metadata.yaml, its constants.
+
+A bag is a directory ``<name>/`` holding ``<name>_0.mcap`` and ``metadata.yaml`` (rosbag2
+metadata version 9, as Jazzy writes it); a lone ``.mcap`` file is read as a bag too.  A file
+was finished when it ends with the closing MCAP magic; one that does not was left by a
+recorder that was killed (:mod:`.recovery` reads it).
+"""
+from __future__ import annotations
+
+import os
+import struct
+from pathlib import Path
+from typing import Any
+
+import yaml
+from mcap.exceptions import McapError
+
+try:                                    # mcap's own zstd decoder (a dependency of mcap)
+    from zstandard import ZstdError
+except ImportError:                     # pragma: no cover
+    ZstdError = McapError
+
+ROS_DISTRO = "jazzy"
+METADATA_VERSION = 9
+MCAP0_MAGIC = b"\x89MCAP0\r\n"       # the first (and last) 8 bytes of an MCAP file
+#: Name of the MCAP metadata records that carry the run's configuration (custom_data).
+CONFIG_RECORD = "hasel_wheel/configuration"
+#: What mcap raises on damaged data (a cut record, a bad chunk, a wrong length).
+MCAP_DATA_ERRORS = (McapError, ValueError, struct.error, ZstdError)
+
+
+class BagError(RuntimeError):
+    """A bag cannot be written or read; the message says which file and why."""
+
+
+def bag_metadata(path: str | os.PathLike) -> dict[str, Any] | None:
+    """The ``rosbag2_bagfile_information`` mapping of a bag directory's metadata.yaml, or
+    None when there is none (a lone .mcap file, or a killed recording).  A metadata.yaml that
+    is not rosbag2 metadata raises :class:`BagError` naming it."""
+    meta = Path(path) / "metadata.yaml"
+    if not meta.is_file():
+        return None
+    try:
+        data = yaml.safe_load(meta.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError) as exc:
+        raise BagError(f"{meta}: not readable YAML ({exc}); delete it and run `ros2 bag "
+                       f"reindex` or read the .mcap file directly") from exc
+    info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
+    if not isinstance(info, dict):
+        raise BagError(f"{meta}: no 'rosbag2_bagfile_information' mapping, so not rosbag2 "
+                       f"metadata; delete it and run `ros2 bag reindex` or read the .mcap file "
+                       f"directly")
+    return info
+
+
+def mcap_files(path: str | os.PathLike) -> list[Path]:
+    """The MCAP files of a bag directory (in metadata order) or a single .mcap file."""
+    p = Path(path)
+    if p.is_file():
+        return [p]
+    if not p.is_dir():
+        raise BagError(f"{p}: no such bag (expected a rosbag2 directory or a .mcap file)")
+    info = bag_metadata(p)
+    if info is not None:
+        names = info.get("relative_file_paths")
+        if not isinstance(names, list) or not names:
+            raise BagError(f"{p / 'metadata.yaml'}: no relative_file_paths list; delete it and "
+                           f"run `ros2 bag reindex` or read the .mcap file directly")
+        return [p / str(f) for f in names]
+    files = sorted(p.glob("*.mcap"))
+    if not files:
+        raise BagError(f"{p}: directory holds neither metadata.yaml nor any .mcap file")
+    return files
+
+
+def topic_names(path: str | os.PathLike) -> set[str] | None:
+    """The bag's topics that hold messages, from its metadata.yaml, without reading a
+    message; None when there is no metadata (a single .mcap file, or a killed recording)."""
+    info = bag_metadata(path) if Path(path).is_dir() else None
+    if info is None:
+        return None
+    try:
+        return {t["topic_metadata"]["name"] for t in info.get("topics_with_message_count") or []
+                if t.get("message_count", 0) > 0}
+    except (TypeError, KeyError, AttributeError):
+        return None                     # malformed: the caller reads the messages instead
+
+
+def file_finished(f: str | os.PathLike) -> bool:
+    """Whether an MCAP file was closed properly (it ends with its summary and footer)."""
+    with open(f, "rb") as fh:
+        return has_summary(fh)
+
+
+def has_summary(fh: Any) -> bool:
+    """Whether the open binary file ``fh`` was finished: it ends with the closing MCAP magic
+    (after the footer; a finished file may still have no summary section, and is then read
+    in order).  Moves the file position."""
+    fh.seek(0, os.SEEK_END)
+    if fh.tell() < 2 * len(MCAP0_MAGIC):
+        return False
+    fh.seek(-len(MCAP0_MAGIC), os.SEEK_END)
+    return fh.read(len(MCAP0_MAGIC)) == MCAP0_MAGIC
