@@ -20,7 +20,7 @@ import numpy as np
 
 from hasel_wheel_common import protocol as P
 from hasel_wheel_driver.link import DriverCore, LinkConfig
-from hasel_wheel_sim.virtual_teensy import DeviceProcess
+from hasel_wheel_sim.device_process import DeviceProcess
 
 
 def decode_throughput(n: int = 200_000) -> float:

@@ -189,7 +189,8 @@ def cmd_link_run(args: argparse.Namespace) -> int:
 
     from hasel_wheel_driver.link import DriverCore, LinkConfig
     from hasel_wheel_common import protocol as P
-    from hasel_wheel_sim.virtual_teensy import DeviceProcess, LinkFaults
+    from hasel_wheel_sim.device_process import DeviceProcess
+    from hasel_wheel_sim.pty_device import LinkFaults
 
     from hasel_wheel_bringup.sequencer import Sequencer
 

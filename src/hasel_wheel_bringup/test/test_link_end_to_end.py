@@ -13,7 +13,8 @@ import pytest
 from hasel_wheel_common import protocol as P
 from hasel_wheel_driver.link import DriverCore, LinkConfig
 from hasel_wheel_bringup.sequencer import Sequencer
-from hasel_wheel_sim.virtual_teensy import DeviceProcess, LinkFaults
+from hasel_wheel_sim.device_process import DeviceProcess
+from hasel_wheel_sim.pty_device import LinkFaults
 
 SCALE = 5.0               # simulated seconds per wall second
 SIM_SECONDS = 30.0        # simulated wheel time of the long runs [s]

@@ -8,7 +8,7 @@ from hasel_wheel_common import protocol as P
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import SECTOR
 from hasel_wheel_sim.plant import Plant, PlantConfig
-from hasel_wheel_sim.virtual_teensy import Firmware
+from hasel_wheel_sim.firmware import Firmware
 
 D = math.radians
 

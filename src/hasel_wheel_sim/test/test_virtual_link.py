@@ -6,7 +6,8 @@ import pytest
 
 from hasel_wheel_common import protocol as P
 from hasel_wheel_sim.plant import Plant, PlantConfig
-from hasel_wheel_sim.virtual_teensy import TX_BUFFER_BYTES, Firmware, VirtualTeensy
+from hasel_wheel_sim.firmware import Firmware
+from hasel_wheel_sim.pty_device import TX_BUFFER_BYTES, VirtualTeensy
 
 
 @pytest.fixture

@@ -1,0 +1,119 @@
+"""The virtual Teensy in a process of its own, as a real device is (no shared GIL):
+:class:`DeviceProcess` starts a :class:`~.pty_device.VirtualTeensy` on a pty, controls it
+through a pipe, and returns the ground truth of every frame (:class:`DeviceReport`) when it
+stops.
+"""
+from __future__ import annotations
+
+import gc
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.firmware import Firmware
+from hasel_wheel_sim.plant import Plant
+from hasel_wheel_sim.pty_device import HostFrame, LinkFaults, SentFrame, VirtualTeensy
+
+
+@dataclass
+class DeviceReport:
+    """What a virtual Teensy process saw, returned when it stops."""
+
+    sent: list[SentFrame]
+    received: list[HostFrame]
+    hv_enabled: bool
+    estop: bool
+    faults: int
+    hv_off_t: float | None
+    t: float
+    speed: float
+    write_drops: int
+    faults_seen: list[str] = field(default_factory=list)
+    host_stream_dropped: int = 0    # host frames the device dropped (CRC, framing, ...)
+    re_anchors: int = 0             # times the tick loop fell behind and re-anchored
+
+
+def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> None:
+    vt = VirtualTeensy(Firmware(Plant(params, plant_config, xi2=w0)), link, time_scale, faults)
+    # Compile (or load) the core first, then move every object alive now out of the garbage
+    # collector's reach: a compile leaves enough objects that a full collection would pause
+    # the device for longer than the host's link timeout at scaled time.  A Teensy has no
+    # such pauses, so neither does this process.
+    vt.warm_up()
+    gc.collect()
+    gc.freeze()
+    vt.start()
+    while True:
+        cmd, arg = conn.recv()
+        if cmd == "unplug":
+            vt.unplug()
+        elif cmd == "plug":
+            vt.plug()
+        elif cmd == "stall":
+            vt.stall(arg)
+        elif cmd == "mute":
+            vt.mute(arg)
+        elif cmd == "status":
+            conn.send(vt.status())
+            continue
+        elif cmd == "stop":
+            vt.stop()
+            conn.send(DeviceReport(vt.sent, vt.received, vt.fw.hv_enabled, vt.fw.estop,
+                                   vt.fw.faults, vt.fw.hv_off_t, vt.fw.plant.t,
+                                   float(vt.fw.plant.wheel.s[L.S_XI2]), vt.write_drops,
+                                   vt.faults_seen, vt.decoder.stats.dropped, vt.re_anchors))
+            return
+        conn.send(None)
+
+
+class DeviceProcess:
+    """A :class:`VirtualTeensy` in its own process, as a real device would be (no shared GIL).
+
+    Control it with :meth:`unplug`, :meth:`plug`, :meth:`stall`, :meth:`mute`, :meth:`status`; :meth:`stop`
+    returns a :class:`DeviceReport` with the ground truth of every frame.
+    """
+
+    def __init__(self, link: str | os.PathLike, plant_config=None, params=None, w0: float = 0.0,
+                 time_scale: float = 1.0, faults: LinkFaults | None = None) -> None:
+        import multiprocessing as mp
+
+        from hasel_wheel_sim.plant import PlantConfig
+        ctx = mp.get_context("spawn")
+        self._conn, child = ctx.Pipe()
+        self.link = Path(link)
+        self._proc = ctx.Process(target=_device_main, daemon=True,
+                                 args=(child, plant_config or PlantConfig(switching="tick"), params,
+                                       w0, str(link), time_scale, faults))
+        self._proc.start()
+        t_end = time.monotonic() + 180.0       # a fresh clone compiles the core first
+        while not self.link.is_symlink():      # the child compiles and plugs in
+            if time.monotonic() > t_end or not self._proc.is_alive():
+                self._proc.kill()
+                raise RuntimeError("the virtual Teensy process did not come up")
+            time.sleep(0.01)
+
+    def _call(self, cmd: str, arg=None):
+        self._conn.send((cmd, arg))
+        return self._conn.recv()
+
+    def unplug(self) -> None:
+        self._call("unplug")
+
+    def plug(self) -> None:
+        self._call("plug")
+
+    def stall(self, seconds: float) -> None:
+        self._call("stall", seconds)
+
+    def mute(self, seconds: float) -> None:
+        self._call("mute", seconds)
+
+    def status(self) -> dict:
+        return self._call("status")
+
+    def stop(self) -> DeviceReport:
+        report = self._call("stop")
+        self._proc.join(timeout=5)
+        return report
