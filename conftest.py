@@ -8,10 +8,6 @@ cache of its own: ``.cache/numba/<worker>`` here.
 import os
 from pathlib import Path
 
-# before any test module imports numpy: the package pins OpenBLAS's kernels, so that the
-# identification tests choose the same on every x86-64 machine (hasel_wheel_ident.numerics)
-import hasel_wheel_ident  # noqa: F401
-
 _WORKER = os.environ.get("PYTEST_XDIST_WORKER")
 if _WORKER and "HASEL_WHEEL_JIT_CACHE" not in os.environ:
     os.environ["HASEL_WHEEL_JIT_CACHE"] = str(Path(__file__).resolve().parent / ".cache"

@@ -17,16 +17,18 @@ from __future__ import annotations
 import math
 import time
 
-import hasel_wheel_ident  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
-import numpy as np
+from hasel_wheel_ident.numerics import pin_blas_kernels
 
-from hasel_wheel_mpc.closed_loop import run_closed_loop, segment_metrics
-from hasel_wheel_mpc.disturbance import TRACKING_GAIN
-from hasel_wheel_mpc.mpc import Mpc, MpcConfig
-from hasel_wheel_mpc.observer import Observer, ObserverConfig, finite_difference_speed
-from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
-from hasel_wheel_sim.model import SECTOR
-from hasel_wheel_sim.plant import Plant, PlantConfig
+pin_blas_kernels()  # before numpy loads: the kernels the printed figures come from (.numerics)
+import numpy as np  # noqa: E402  (this and the imports below: after the pin)
+
+from hasel_wheel_mpc.closed_loop import run_closed_loop, segment_metrics  # noqa: E402
+from hasel_wheel_mpc.disturbance import TRACKING_GAIN  # noqa: E402
+from hasel_wheel_mpc.mpc import Mpc, MpcConfig  # noqa: E402
+from hasel_wheel_mpc.observer import Observer, ObserverConfig, finite_difference_speed  # noqa: E402
+from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping  # noqa: E402
+from hasel_wheel_sim.model import SECTOR  # noqa: E402
+from hasel_wheel_sim.plant import Plant, PlantConfig  # noqa: E402
 
 D = math.radians
 ENCODER = {"encoder": {"enabled": True, "noise_std": {"value": 0.0, "unit": "rad"}}}

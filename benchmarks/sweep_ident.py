@@ -30,18 +30,20 @@ import math
 import time
 from dataclasses import dataclass
 
-import hasel_wheel_ident  # noqa: F401  (before numpy: pins OpenBLAS's kernels, see .numerics)
-import numpy as np
+from hasel_wheel_ident.numerics import pin_blas_kernels
 
-from hasel_wheel_ident import candidates as C
-from hasel_wheel_ident import fit as F
-from hasel_wheel_ident import metrics as M
-from hasel_wheel_ident import select as SEL
-from hasel_wheel_ident import synthetic as S
-from hasel_wheel_ident import verdict as V
-from hasel_wheel_sim.effects import effects_from_mapping
-from hasel_wheel_sim.params import WheelParams
-from hasel_wheel_sim.plant import PlantConfig
+pin_blas_kernels()  # before numpy loads: the kernels the printed figures come from (.numerics)
+import numpy as np  # noqa: E402  (this and the imports below: after the pin)
+
+from hasel_wheel_ident import candidates as C  # noqa: E402
+from hasel_wheel_ident import fit as F  # noqa: E402
+from hasel_wheel_ident import metrics as M  # noqa: E402
+from hasel_wheel_ident import select as SEL  # noqa: E402
+from hasel_wheel_ident import synthetic as S  # noqa: E402
+from hasel_wheel_ident import verdict as V  # noqa: E402
+from hasel_wheel_sim.effects import effects_from_mapping  # noqa: E402
+from hasel_wheel_sim.params import WheelParams  # noqa: E402
+from hasel_wheel_sim.plant import PlantConfig  # noqa: E402
 
 #: plant effect -> (candidate id, {plant parameter: (unit, low, high)}) with sizes drawn
 #: log-uniform in [low, high]; "phase" is drawn uniform in [-pi, pi)

@@ -13,8 +13,6 @@ data set determines), ``report`` and ``plots`` (report.md, report.json, PNG figu
 model.yaml), ``threads`` (the worker threads and BLAS limit the fits share), ``synthetic``
 (recordings from the plant simulator).
 
-Importing the package pins OpenBLAS's kernels first (:mod:`.numerics`).
+Importing the package leaves OpenBLAS's kernel choice alone; ``hasel_wheel identify`` and the
+identification benchmarks pin it (:mod:`.numerics`).
 """
-from hasel_wheel_ident.numerics import pin_blas_kernels
-
-pin_blas_kernels()

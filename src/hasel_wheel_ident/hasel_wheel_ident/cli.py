@@ -4,9 +4,11 @@
     hasel_wheel identify data/*.csv --out report/               # or bag directories / .mcap
 
 ``identify`` writes report.md (+ PNG figures), report.json and model.yaml under ``--out``
-and prints a summary.  With ``--compare-plant`` it also runs the closed-loop demo profile on
-that plant twice, with the nominal and with the identified model in the controller, and
-adds their tracking errors to the report.
+and prints a summary.  Run as a command (``hasel_wheel identify ...``), it runs OpenBLAS's
+Haswell kernels (:func:`.numerics.rerun_pinned`: the same report for the same recording on
+every x86-64 machine; test_numerics.py).  With ``--compare-plant`` it also runs the
+closed-loop demo profile on that plant twice, with the nominal and with the identified
+model in the controller, and adds their tracking errors to the report.
 """
 from __future__ import annotations
 
@@ -22,6 +24,7 @@ from hasel_wheel_sim.plant import PlantConfig, load_plant_config
 from hasel_wheel_ident import candidates as C
 from hasel_wheel_ident import synthetic as S
 from hasel_wheel_ident.data import TrialError, load_trials, separate_wheels, write_csv
+from hasel_wheel_ident.numerics import rerun_pinned
 
 
 def _ids(text: str | None) -> list[str] | None:
@@ -30,6 +33,8 @@ def _ids(text: str | None) -> list[str] | None:
 
 def cmd_identify(args: argparse.Namespace) -> int:
     """Identify, write the report, print a summary."""
+    if sys.argv[1:2] == ["identify"]:        # this process is the command, not a caller's
+        rerun_pinned()
     from hasel_wheel_ident.identifiability import identifiability    # (matplotlib only when needed)
     from hasel_wheel_ident.report import near_miss_text, stall_texts, write_report
     from hasel_wheel_ident.select import identify
