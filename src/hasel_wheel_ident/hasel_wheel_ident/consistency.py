@@ -162,6 +162,7 @@ from hasel_wheel_ident.candidates import BY_ID, Candidate, ParamSpec
 from hasel_wheel_ident.data import Trial, hv_time
 from hasel_wheel_ident.fit import FitResult, Problem, effect_wald_p
 from hasel_wheel_ident.metrics import fitted_metrics, pooled_rmse
+from hasel_wheel_ident.reasons import Finding, Reason
 
 #: The nominal model's parameters (:func:`~.fit.nominal_specs`), refitted in each trial too.
 NOMINAL = frozenset({"peak", "centre", "width", "b", "brake_gain", "tau_f"})
@@ -586,18 +587,21 @@ def inconsistent(c: Consistency | None) -> bool:
     return c is not None and c.trend_p < TREND_P and abs(c.exponent) > EXPONENT
 
 
-def stand_in_reason(c: Candidate, con: Consistency | None) -> str | None:
-    """Why ``c``, refitted trial by trial as ``con``, looks like a stand-in for another
-    effect (its size trends with the trials' speed); None when it does not."""
+def stand_in_reason(c: Candidate, con: Consistency | None) -> Finding | None:
+    """Code ``SPEED_STAND_IN`` when ``c``, refitted trial by trial as ``con``, is
+    :func:`inconsistent` (its size trends with the trials' speed); None otherwise.  Values:
+    ``unit`` ("trial" or "span"), ``exponent`` k and ``trend_p``."""
     if not inconsistent(con):
         return None
     how = ("in every trial, refitted trial by trial" if con.unit == "trial" else
            "at every speed, refitted span by span (the trials' speeds while driven differ by "
            f"less than {MIN_SPEED_RATIO}x; {len(con.trials)} spans of "
            f"{len(con.halves_trials)} drives)")
-    return (f"{c.id} is not the same {how}: {con.text(c)}; a physical {c.id} would be one "
-            f"value at every speed, so it stands in for an effect whose size goes otherwise "
-            f"with the speed")
+    return Finding(Reason.SPEED_STAND_IN,
+                   f"{c.id} is not the same {how}: {con.text(c)}; a physical {c.id} would be "
+                   f"one value at every speed, so it stands in for an effect whose size goes "
+                   f"otherwise with the speed",
+                   {"unit": con.unit, "exponent": con.exponent, "trend_p": con.trend_p})
 
 
 def leans(c: Consistency | None) -> bool:
@@ -748,9 +752,11 @@ def measure_beside(trials: list[Trial], base: WheelParams, effects: tuple[Candid
 
 def drift_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
                    fit: FitResult, effect: Candidate, con: Consistency | None,
-                   min_gain: float, window: float = 1.0, threads: int = 2) -> str | None:
+                   min_gain: float, window: float = 1.0, threads: int = 2) -> Finding | None:
     """Why ``effect`` (in ``effects``, the model fitted on all ``trials`` as ``fit``, with
-    windows of ``window`` [s]) stands in for a change within the trials, or None.
+    windows of ``window`` [s]) stands in for a change within the trials (code
+    ``DRIFT_STAND_IN``, or ``HV_LOSS_LOOKALIKE`` for a rise lag that does not drift), or
+    None; values: ``drift`` h, ``p`` (its Wald p beside the device), ``device_p``.
 
     Tested when :func:`can_measure_beside`, for an effect that drifts (:func:`drifts` of
     ``con``, its check trial by trial) and for every rise lag (:data:`LOSS_LOOKALIKES`).  It
@@ -769,16 +775,19 @@ def drift_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candid
                                     window, threads)
     if b is None or b.holds():
         return None
+    values = {"drift": con.drift, "p": b.p, "device_p": b.device_p}
     if drifting:
-        return (f"{effect.id} changes within the trials ({con.drift_text()}); "
-                f"{b.text(effect.id, need=True)}: there it no longer holds, so it stands "
-                f"in for an effect that changes during the trials")
+        return Finding(Reason.DRIFT_STAND_IN,
+                       f"{effect.id} changes within the trials ({con.drift_text()}); "
+                       f"{b.text(effect.id, need=True)}: there it no longer holds, so it "
+                       f"stands in for an effect that changes during the trials", values)
     if not b.device_p < LOOKALIKE_P:
         return None
-    return (f"{effect.id} and a loss with the accumulated HV time weaken the pushes in close "
-            f"shapes; {b.text(effect.id, need=True)}: there it no longer holds while the "
-            f"loss does (under {LOOKALIKE_P:g}), so it stands in for a loss that grows with "
-            f"the HV time")
+    return Finding(Reason.HV_LOSS_LOOKALIKE,
+                   f"{effect.id} and a loss with the accumulated HV time weaken the pushes in "
+                   f"close shapes; {b.text(effect.id, need=True)}: there it no longer holds "
+                   f"while the loss does (under {LOOKALIKE_P:g}), so it stands in for a loss "
+                   f"that grows with the HV time", values)
 
 
 #: The measuring device for a size that grows with the speed (module docstring): the rise
@@ -905,10 +914,11 @@ def can_measure_lag(effects: tuple[Candidate, ...]) -> bool:
 
 def lag_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, ...],
                  fit: FitResult, effect: Candidate, con: Consistency | None,
-                 min_gain: float, window: float = 1.0, threads: int = 2) -> str | None:
+                 min_gain: float, window: float = 1.0, threads: int = 2) -> Finding | None:
     """Why ``effect`` (in ``effects``, the model fitted on all ``trials`` as ``fit``, with
-    windows of ``window`` [s]) stands in for a force that builds up after each switch-on,
-    or None.
+    windows of ``window`` [s]) stands in for a force that builds up after each switch-on
+    (code ``SWITCH_ON_LAG_STAND_IN``; values ``exponent`` k, ``p`` its Wald p beside the
+    device, ``device_p``), or None.
 
     Only an effect whose size grows with the speed (:func:`grows_with_speed` of ``con``)
     is tested, and only when :func:`can_measure_lag`.  It is refitted beside
@@ -921,7 +931,10 @@ def lag_stand_in(trials: list[Trial], base: WheelParams, effects: tuple[Candidat
                                     window, threads)
     if con.beside_lag is None or con.beside_lag.holds():
         return None
-    return (f"{effect.id} grows with the speed ({con.text(effect)}); "
-            f"{con.beside_lag.text(effect.id, need=True)}: there it no longer holds, so it "
-            f"stands in for a loss at each switch-on, which takes a larger share of the "
-            f"shorter pushes at speed")
+    b = con.beside_lag
+    return Finding(Reason.SWITCH_ON_LAG_STAND_IN,
+                   f"{effect.id} grows with the speed ({con.text(effect)}); "
+                   f"{b.text(effect.id, need=True)}: there it no longer holds, so it stands "
+                   f"in for a loss at each switch-on, which takes a larger share of the "
+                   f"shorter pushes at speed",
+                   {"exponent": con.exponent, "p": b.p, "device_p": b.device_p})

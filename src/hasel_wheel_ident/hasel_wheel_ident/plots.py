@@ -1,6 +1,6 @@
 """The report's figures (PNG, matplotlib's Agg backend: no display needed).
 
-Each function draws one figure from an :class:`~.select.Identification` and returns the
+Each function draws one figure from an :class:`~.identification.Identification` and returns the
 file name it wrote under ``out``.
 """
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np  # noqa: E402
 
 from hasel_wheel_ident.metrics import measured_speed, simulate_trial, speed_from_angle  # noqa: E402
 from hasel_wheel_ident.residual import Diagnostics  # noqa: E402
-from hasel_wheel_ident.select import Identification  # noqa: E402
+from hasel_wheel_ident.identification import Identification  # noqa: E402
 
 DPI = 110
 

