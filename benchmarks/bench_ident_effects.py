@@ -44,6 +44,8 @@ from hasel_wheel_ident import metrics as M
 from hasel_wheel_ident import report as R
 from hasel_wheel_ident import residual as RES
 from hasel_wheel_ident import select as SEL
+from hasel_wheel_ident import unexplained as UNX
+from hasel_wheel_ident.identification import Identification
 from hasel_wheel_ident import synthetic as S
 from hasel_wheel_ident import verdict as V
 from hasel_wheel_ident.consistency import caution, leans
@@ -144,7 +146,7 @@ def run(label: str, effect: dict, cid: str, truth: dict, specs, tag: str,
           f"(x{before / after:.2f} smaller){floor}; refits: {refits or 'none'}; {dt:.0f} s")
 
 
-def near(res: SEL.Identification) -> str:
+def near(res: Identification) -> str:
     """The near misses of ``res`` (report.near_miss_texts) as "; near miss ..." each; every
     case's line ends with them."""
     return "".join(f"; near miss {m}" for m in R.near_miss_texts(res))
@@ -319,16 +321,16 @@ def run_outside_library() -> None:
                     f"+- {c.drift_sd:.2f} (p = {c.drift_p:.1e})"
                     for i, c in res.consistency.items()]
         others = [f"{s.axis} {s.period:.3g}" if s.period is not None else s.axis
-                  for s in res.diagnostics_after.signatures if not SEL.drift_signature(s)]
+                  for s in res.diagnostics_after.signatures if not UNX.drift_signature(s)]
         # each measuring device beside the final model, for the drift left
         devices = [f"{k} {d['value']:.3g} {d['unit']}, free run {d['sim_rmse_rad_s']:.4f} "
                    f"rad/s (model {d['sim_rmse_model_rad_s']:.4f})"
-                   for s in res.diagnostics_after.signatures if SEL.drift_signature(s)
+                   for s in res.diagnostics_after.signatures if UNX.drift_signature(s)
                    for k, d in s.devices.items()]
         if devices:
             drift += " measured beside the model by " + "; ".join(devices)
         moved = [s.axis for s in res.diagnostics_after.signatures
-                 if SEL.drift_signature(s) and tr is not None and s.axis != tr.axis]
+                 if UNX.drift_signature(s) and tr is not None and s.axis != tr.axis]
         if moved:
             drift += f"; reported along {moved[0]} (the device that takes up the most)"
         # the look-alikes refused beside a device (consistency.drift_stand_in, lag_stand_in)
@@ -356,7 +358,7 @@ LOOK_ALIKE_AXES = {"rise_lag": (("speed",), ("time", "hv_time")),
                    "charge_retention": (("hv_time", "time"), ("speed",))}
 
 
-def look_alike_verdict(res: SEL.Identification, cid: str, apart: float) -> str:
+def look_alike_verdict(res: Identification, cid: str, apart: float) -> str:
     """"right" when nothing is named, the only signature reported is along ``cid``'s own
     axis, and either the regression read the drift there (p < 1e-20) with the other loss's
     axis at least ``apart`` times less likely, or the measuring devices moved it there (its
