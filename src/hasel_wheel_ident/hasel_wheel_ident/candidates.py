@@ -149,14 +149,8 @@ def spread_values(gains: Sequence[float] | np.ndarray) -> tuple[float, dict[str,
 #: that has broken down and barely pushes) to one at e^3 = 20 times it.  The plant draws
 #: gains down to 0.05 (``gain_spread`` std up to 0.5) and takes explicit gains in (0, 10];
 #: a gain below 0.7 % of the mean (0.001 among gains of 1) would still stop at the bound.
-#: With bounds of +-1.5 (0.22 to 4.5 times), a spread of std 0.5 (plant seed 3, two pads at
-#: 0.078 of the mean) stopped those two at 0.223 and pulled the other fourteen 9-17 % low
-#: (held-out simulation error 0.0620 rad/s; 0.0526 with these bounds, every gain within
-#: 2.7 % or, for the two weak pads, 0.021 of the mean), and one pad at 0.060 of the mean
-#: stopped there too, the others up to 17 % low (now 0.0602, the others within 3.0 %).
-#: Ad hoc, 3 x 34 s, the old bounds at 04dd5e9 and these at af489c3; the data sets are those
-#: of test_gains_far_from_the_mean_are_measured_not_stopped_at_a_bound (test_ident_effects),
-#: which asserts looser tolerances.
+#: Held by test_gains_far_from_the_mean_are_measured_not_stopped_at_a_bound
+#: (test_ident_effects).
 SPREAD_LOG_LOWER = -5.0
 SPREAD_LOG_UPPER = 3.0
 

@@ -1,147 +1,25 @@
-"""Is an effect the same in every trial?  Its parameters refitted trial by trial.
+"""Is an effect the same in every trial?  Its parameters refitted trial by trial, on the
+halves of each drive, and beside the measuring devices.
 
-A physical effect of the wheel has one value: an off-centre mass is as heavy in the slow
-trial as in the fast one.  An effect that only stands in for another does not.  Fitted to an
-angle sensor's reading error e sin(xi1 + phase), an off-centre mass needs the torque
-J e xi2^2, which grows with the trial's speed; fitted to an off-centre mass T sin(xi1 + phase),
-a reading error needs e = T / (J xi2^2), which falls with it.  So each chosen effect is
-refitted on each trial alone, together with the nominal model (force law and friction,
-:data:`NOMINAL`), while any other effect is held at the fit on all trials, and its size is
-regressed on the trial's speed.  The nominal model has to move as well: held at the fit on
-all trials, it biases an effect that trades off with it.  Viscous drag shares its speed
-dependence with the force law's b and, within a trial at nearly one speed, its torque with
-friction; with the force law held the right drag model gave k = -0.24 to -0.62 (p down to
-0.01) over four plant seeds, -0.01 and +0.06 with it refitted; with friction held as well,
-k = +3.0 to +3.8 (p <= 1e-4, wrongly refused) over six (ad hoc, 3 x 34 s).
+* **Trial by trial** (:func:`trial_consistency`): each chosen effect is refitted on each trial
+  alone with the nominal model (:data:`NOMINAL`), the other effects held.  Its size m_j (the
+  parameters projected on their mean direction, in units of their typical magnitude) is
+  regressed on ln v_j, v_j the trial's mean speed while driven [rad/s]: size ~ v^k.  It is
+  *inconsistent* (refused, code ``SPEED_STAND_IN``) when the slope's two-sided p <
+  :data:`TREND_P` and |k| > :data:`EXPONENT`; short of that with p < :data:`LEAN_P` it
+  *leans* (a caution).  Trials whose speeds span less than :data:`MIN_SPEED_RATIO` are cut
+  into spans (:func:`speed_units`).  Tested in ``test_ident_consistency.py``.
+* **Within the trials**: refitted on the halves of each drive, size ~ hv^h with hv the
+  accumulated HV time; it *drifts* (:func:`drifts`) when p < :data:`TREND_P` and
+  |h| > :data:`DRIFT`.
+* **Beside a measuring device** (:data:`HV_LOSS`, :data:`ON_LAG`, never named): a drifting
+  effect or a rise lag is refitted beside a force loss that grows with HV time
+  (:func:`drift_stand_in`: codes ``DRIFT_STAND_IN``, ``HV_LOSS_LOOKALIKE``); an effect whose
+  size grows with speed beside a force that builds up after each switch-on
+  (:func:`lag_stand_in`: code ``SWITCH_ON_LAG_STAND_IN``).  It stands in when it no longer
+  holds there (:meth:`Beside.holds`).
 
-Size.  The parameters of trial j, u_j (k,) in units of each one's typical magnitude, are
-projected onto the direction of their inverse-covariance mean ubar: m_j = ubar' u_j / |ubar|,
-with variance ubar' C_j ubar / |ubar|^2 from the fit's covariance C_j (widened for the
-residual's autocorrelation, :func:`~.fit.autocorrelation_inflation`).
-
-Trend.  Weighted least squares m_j = a + b (ln v_j - mean ln v), v_j the trial's mean speed
-while driven; the exponent k = b / a is the power of the speed the size goes with
-(size ~ v^k near the trials' speeds).  The slope's variance comes from the fits'
-covariances alone.  It is not widened by the scatter about the line: a stand-in's size goes
-as a power of the speed, curved against ln v, so its scatter is large exactly when the trend
-is real (with that widening, an eccentricity standing in for an off-centre mass fell from
-p <= 2e-8 to 1e-3..1e-2 over six seeds, ad hoc).  The effect is *inconsistent*
-when the slope is significant (two-sided p < :data:`TREND_P`) and |k| > :data:`EXPONENT`.
-Ad hoc, 3 x 34 s, plant seeds 11-16 (README): the right models of seven effects gave
-|k| <= 0.85 with p >= 0.015; an off-centre mass on reading-error data k = +1.82 to +2.13, a
-reading error on off-centre-mass data -2.69 to -3.66, all with p <= 5e-7.
-The homogeneity chi^2 of the u_j about ubar is reported beside it.
-
-Span by span.  Runs of one closed loop through one reference profile (the demo's Fig. 11
-steps, recorded by several wheels) all have the same mean speed, so the trials cannot show
-a trend with it (an angle sensor's eccentricity standing in for an off-centre mass, 3 such
-runs of 230 s: k = +8.6 +- 133, and it was named; ad hoc.  Later a 0.31 mrad eccentricity
-was still named beside it there, its gain from the force law it let unbend, which no check
-here sees; since the screening's short fit from the reference force law (screen.bent) the
-off-centre mass is named alone: README, Known gaps).  When the trials' speeds while driven span
-less than :data:`MIN_SPEED_RATIO`, each drive is cut into :data:`SPANS` spans of about
-equal duration, fewer when they would average under :data:`MIN_SPAN_TURNS` turns
-(:func:`speed_spans`, between two pushes), and each span is refitted as a trial is (the
-effect's own parameters and the nominal model), weighed alone while the samples before it
-still run the model (``keep``; cut off instead, a right retention of 0.2/s scattered over
-the spans, chi^2 54 on 17 dof, against 28 with its history).  The spans are then the units
-of the trend (and of the chi^2 about one value, which is reported only).  Ad hoc, 3
-closed-loop runs of 115 s (the demo's profile at half length, plant seed 3, fitted from the
-reference values): the right models of seven effects gave |k| <= 0.07 (p >= 0.34); an
-off-centre mass on eccentricity data k = +0.91 +- 0.02; an eccentricity on off-centre-mass
-data only k = -0.41 +- 0.03 (p = 2e-40), which is *not* refused (|k| < :data:`EXPONENT`);
-in the search, fitted from the nominal model, it read -0.61 +- 0.04 and was refused: in a
-closed loop the pushes answer the disturbance, so a stand-in's size need not follow a power
-of the speed.  Its values scatter far beyond their uncertainty (chi^2 505 on 34 dof), but
-so, less, did those of the right retention in the search (51 on 17, p = 3e-5) and of the
-right gain spread (5714 on 255): a rule on that scatter refused the right retention and
-named a gain spread instead (ad hoc), and was not kept.  The halves below stay halves of
-the trials.
-
-Within each trial.  Speed is not the only thing that changes: as a trial goes on, every
-actuator accumulates HV time.  An effect that stands in for one that grows with it (charge
-retention) has to change within each trial, where the trials' speeds cannot show it.  So each
-trial's drive is cut at its middle (the coast is left out, :func:`_halves`), and
-the effect's own parameters are refitted on each half alone (:class:`~.fit.Problem` with
-``keep``: the samples before the half still run the model, so the retained charge builds up
-from the trial's start), everything else held at that trial's own fit.  Holding the force
-law matters: free in each half, it would take up any change of the force itself.  The
-halves' variances are conditional on it, so they are somewhat too small.  A change across
-the pooled direction (a phase that drifts) is not seen.  The size of each half
-is projected on the same direction ubar; ``h`` = (late - early) / (size on the whole trial x
-ln(hv_late / hv_early)), hv the mean accumulated HV time of the driven actuator in each half,
-is averaged over the trials with inverse-variance weights (:func:`_drift`).  Within a trial
-the speed rises with the HV time (the wheel spins up through the whole drive), so this does
-not tell an effect of speed from one of HV time: it tells an effect that is one value from
-one that is not.  Ad hoc, 3 x 34 s, plant seeds 11-13 (README): a rise lag fitted to
-retention of 0.2/s gave h = +0.08..+0.09 +- 0.01 (p <= 1e-30); nine right models alone
-(seven effects, retention and rise lag at two sizes each) p >= 0.2 (|h| <= 0.01 for the
-torques and the sensor eccentricity, up to 0.25 +- 0.25 for the gain spread, whose fifteen
-gains a half determines poorly).  But a right effect drifts too when another
-one that changes during the trial is still missing: on the realistic plant (5 x 60 s,
-retention 0.01/s and a 10 ms rise lag among its effects; ``bench_ident_effects.py`` prints
-it) the right viscous drag, fourth in the model, gives h = +0.07 +- 0.01 (p = 2e-8).  As
-first built, a drift refused the refit: there the drag was replaced by a rise lag and the
-held-out simulation error rose from 0.0358 to 0.0524 rad/s (printed at fe12cb2).  So a drift
-is not a refusal: it is reported with the chosen effect as a caution
-(:func:`drift_caution`, |h| > :data:`DRIFT` with p < :data:`TREND_P`).  A retention fitted
-to a 40 ms rise lag does not drift (h = +0.04..+0.08, p >= 0.12): both losses grow through
-each drive.
-
-Short of a refusal.  A trend with speed steeper than speed^(+-EXPONENT) with p between TREND_P
-and LEAN_P is not enough to refuse an effect (the right models' p reach down to 0.015), but
-it is reported with the chosen effect as a caution (:func:`leans`, :func:`lean_caution`;
-:func:`caution` gives every caution).  On three short trials the speed and the HV time rise
-together, within each drive and across the trials, so a retention named for a rise lag
-there leans on the speed without reaching TREND_P (README, Known gaps).
-
-Beside a measured drift.  A drift alone cannot say which of the two it is, but a refit can:
-the effect that drifts is refitted once more beside a force loss that grows with the
-accumulated HV time (:data:`HV_LOSS`, charge retention's form without recovery, one
-parameter: a measuring device, never chosen and never written to model.yaml).  A right
-effect keeps its size and its significance there, and still runs the trials better than the
-device alone; a stand-in for the change loses both (:func:`drift_stand_in`, which then
-refuses it).  In the search on 5 x 60 s, plant seed 11, a rise lag standing in for
-retention of 0.05/s (retention not in the library) had Wald p 0.60 beside the device, and
-the free run on all trials was 0.0333 rad/s with it against 0.0323 without it (ad hoc, the
-same model refitted from the search's final values: tau 33 -> 8 ms); on the realistic plant
-the right drag, fourth in the model, stayed at c = 4.91e-4 (the truth 5e-4), p = 1e-175,
-and cut that error from 0.0487 to 0.0333 rad/s (the device took 0.0112/s, the plant's
-retention is 0.01/s; bench_ident_effects.py prints it).  Ad hoc, a right 40 ms rise lag
-stayed at 41 ms beside the device.
-
-Beside a force that builds up after each switch-on.  An effect whose size grows with the
-trials' speed short of a refusal may stand in for a loss at each switch-on: a force that
-builds up over a time constant takes a fixed bite out of every push, so a larger share of
-the shorter pushes at speed.  On three short trials, where the speed and the HV time rise
-together, retention fitted to a 40 ms rise lag grew so (each model fitted on all trials:
-k = +0.99 to +1.59, p = 6e-4 to 0.045 over plant seeds 11, 12, 14-16; ad hoc), and the
-search named it with seeds 11, 12, 14 and 15.  So an effect that grows with
-the speed (:func:`grows_with_speed`: k > :data:`EXPONENT`, p < :data:`SEEK_P`) is refitted
-once more beside :data:`ON_LAG` (rise lag's form, one parameter, a measuring device: never
-chosen, never written to model.yaml) and refused when it no longer holds there
-(:func:`lag_stand_in`, the rule of :meth:`Beside.holds`).  Ad hoc, 3 x 34 s: on the rise-lag
-data of seeds 11-16 the device took 39-41 ms and retention's Wald p there was 0.23 to 0.50,
-the free run within 3.3 % of the device's alone; the right retention of 0.1/s (seeds 3,
-11-16) kept p <= 5e-7 and a cut of 14 % or more, the right drag of 1e-3 and gain spread
-of 0.08 p <= 1e-80 and 23 % or more.  Weak retention (0.05/s) is close enough in shape to
-a 15 ms lag for the device to take it up on these short drives (p from 1e-19 to 0.5 over
-seeds 3, 11-16), so where such a retention also grows with the speed (seed 13, k = +2.03,
-p = 0.004 in this fit) the search refuses it beside the device and names a rise lag, which
-runs the held-out trials better than the true model there (README, Known gaps).
-
-The other way round.  A rise lag fitted to a loss with HV time need not drift within the
-trials (retention of 0.05/s on 3 x 34 s: h = -0.01 +- 0.02), so the check beside
-:data:`HV_LOSS` would never run, and the lag was named (with each of plant seeds 11-16,
-retention outside the library; ad hoc).  So every rise lag is refitted beside HV_LOSS
-(:data:`LOSS_LOOKALIKES`); one that does not drift is refused when it no longer holds
-there and the device is itself significant beside it (:data:`LOOKALIKE_P`).  The device's
-own p is what keeps a right weak lag: those of 15-20 ms sit at the free run's floor and do
-not hold beside it either.  With seed 13 the lag held there (a cut of 5.4 %), and was
-named, while the coast-downs read tau_f low (they ran on into the rest); with tau_f right
-it no longer holds, and nothing is named.  After the search both devices are refitted together beside the final model
-(:func:`together_lead`): a look-alike may run short trials better alone than the loss that
-is there, but it does not stay significant beside it.
+The evidence behind each threshold is in docs/identification.md.
 """
 from __future__ import annotations
 
@@ -182,9 +60,7 @@ EXPONENT = 0.5
 MIN_SPEED_RATIO = 1.2
 SPANS = 6
 #: ... but no more spans than leave this many turns of the wheel to each on average, so that
-#: a once-per-turn effect is seen over a few turns in every span (two 45 s runs cut into six
-#: spans of 7.5 s left about one turn to the slowest; a chi^2 scatter rule tried then, and
-#: not kept, read p = 0.0045 for the right off-centre mass there; ad hoc).
+#: a once-per-turn effect is seen over a few turns in every span.
 MIN_SPAN_TURNS = 3.0
 #: The fewest samples of a span (a :class:`~.data.Trial` needs 30).
 MIN_SPAN_SAMPLES = 30
@@ -193,10 +69,7 @@ MIN_SPAN_SAMPLES = 30
 DRIFT = 0.05
 #: A trend with the trials' speed this unlikely by chance (two-sided), steeper than
 #: speed^(+-EXPONENT) but short of TREND_P, is reported as a caution (:func:`leans`), not
-#: refused.  On 3 x 34 s (plant seeds 11-14, ad hoc) retention fitted in place of a 40 ms
-#: rise lag outside the library read p = 0.0025, 0.045, refused, 0.005 (k = +1.0 to +1.5)
-#: and was named, until the refit beside :data:`ON_LAG` (:func:`lag_stand_in`); the right
-#: models of seven effects read p >= 0.015 (42 runs, module docstring).
+#: refused.
 LEAN_P = 1e-2
 
 
@@ -335,10 +208,8 @@ def trial_consistency(trials: list[Trial], base: WheelParams, effects: tuple[Can
     every = Problem(trials, base, effects, window=window)
     x_all = fit.x0
     # the trials as the fits see them, a tail at rest trimmed (fit.at_rest_trimmed): the
-    # speeds, spans and halves are taken from these.  A wheel that stalls for good while
-    # driven (closed loops on a gain spread of std 0.5, plant seed 3: all three runs stalled,
-    # at 21.2, 8.4 and 15.6 s of 115) would otherwise have its second half in the trimmed
-    # tail, a fit of no samples (ad hoc, at 287783d: two of the three runs' halves)
+    # speeds, spans and halves are taken from these, so that a wheel that stalls for good
+    # while driven has no half in the trimmed tail (a fit of no samples)
     seen = every.trials
 
     def one(j: int) -> FitResult:
@@ -687,27 +558,15 @@ HV_LOSS = Candidate("hv_loss", "actuator force lost with accumulated HV time (a 
 #: retention of 0.05/s: h = -0.01 +- 0.02; README, Known gaps).
 LOSS_LOOKALIKES = frozenset({"rise_lag"})
 #: ... which stands in when it does not hold beside the device while the device is
-#: significant beside it at this level.  Ad hoc, 3 x 34 s, a rise lag fitted on all trials
-#: (to convergence, from the default start: not the search's fits) and refitted beside the
-#: device: on retention of 0.05/s (plant seeds 3, 11-16) the device read p = 3.6e-25 to
-#: 1.9e-3 and the lag never held (in the search, with seed 13 and tau_f read low from the
-#: coast-downs, it held: a cut of 5.4 %, :func:`loss_caution`); on rise lags of 15-60 ms (seeds 3,
-#: 11-13) the device read p >= 0.096, and the lags of 30 ms and more held while those of
-#: 15-20 ms did not (p 1.6e-4 to 2e-12, free runs 0-5 % worse than the device alone: at
-#: the free run's floor).  On 5 x 60 s (seed 3) a 20 ms lag: device p 0.99; retention of
-#: 0.05/s: device p <= 2e-88.
+#: significant beside it at this level [1].
 LOOKALIKE_P = 1e-2
 #: Beside the device, the effect must still differ from "no effect" at this level (the
 #: search's Wald test) ...
 BESIDE_P = 1e-6
 #: Evaluation limit of the measuring refit beside an unexplained drift, after the search
-#: (:func:`refit_beside`, once per run and device).  It starts from a model whose force law
-#: bent to take up the loss, and must get back from there: with retention of 0.2/s left out
-#: (3 x 34 s, plant seed 11, ad hoc) it had not converged after 30 evaluations (the free run
-#: on all trials 0.0428 rad/s) and converged after 89 (0.0345; the true model 0.0303).  The
-#: stand-in tests during the search (:func:`measure_beside`) keep :data:`MAX_NFEV`: they
-#: start from the effect's own fit, and run to convergence one cost the platform case of
-#: bench_ident.py 30 s (84.5 against 54.8 s) for the same verdicts (ad hoc).
+#: (:func:`refit_beside`, once per run and device): it starts from a force law bent to take
+#: up the loss.  The stand-in tests during the search (:func:`measure_beside`) keep
+#: :data:`MAX_NFEV`, since they start from the effect's own fit.
 BESIDE_NFEV = 150
 
 
@@ -839,11 +698,9 @@ def together_lead(devices: dict[str, dict]) -> str | None:
     refit together is missing, or does not single one out.
 
     This overrides the free runs: on short trials a look-alike can run them better than the
-    loss that is there.  Ad hoc, 3 x 34 s, retention of 0.05/s outside the library (plant
-    seed 12): alone beside the model the HV-time loss ran the trials at 0.0270 rad/s and the
-    switch-on lag at 0.0245, but together the loss read p = 8e-25 and the lag p = 1.0 (a p of
-    1 can also mean a parameter the fit leaves undetermined, :func:`~.fit.wald_p`: beside
-    the other device that device is then not needed either)."""
+    loss that is there.  (A p of 1 can also mean a parameter the fit leaves undetermined,
+    :func:`~.fit.wald_p`: beside the other device that device is then not needed either.)
+    Tested in ``test_ident_consistency.py``."""
     ps = {k: d.get("wald_p_together", math.nan) for k, d in devices.items()}
     if len(ps) < 2 or not all(math.isfinite(p) for p in ps.values()):
         return None
@@ -893,9 +750,7 @@ def devices_verdict(devices: dict[str, dict], min_gain: float) -> str:
 
 #: An effect whose size grows with the trials' speed (k > :data:`EXPONENT`) with a trend
 #: this unlikely by chance (two-sided) or less is refitted beside :data:`ON_LAG`
-#: (:func:`lag_stand_in`).  Ad hoc, 3 x 34 s, plant seeds 11-16, each model fitted on all
-#: trials: retention fitted to a 40 ms rise lag read k = +0.99 to +2.34 with p = 3e-5 to
-#: 0.045.
+#: (:func:`lag_stand_in`).
 SEEK_P = 0.1
 
 

@@ -52,10 +52,8 @@ from hasel_wheel_ident.threads import run_split, with_one_blas_thread
 #: their encoder interval, ~11,000 on 5 x 60 s at 300 Hz (13 % of them), so 1e-6 of it is
 #: ~0.01 of one unit of chi^2: far inside any interval (95 % spans 3.84 units).  It is also
 #: about the precision of the cost itself: the window starts are solved to ~1e-7 rad, and
-#: solving them with 60 Gauss-Newton iterations instead of 12 moved the cost by 5e-6 of itself
-#: (ad hoc, the nominal model on a platform pull).  With 1e-10 the trust region chased that
-#: noise: the folds of a gain-spread fit, started at the fit on all trials, took 11-30
-#: evaluations each, 4-6 with 1e-6 (ad hoc, 5 x 60 s, seed 3).
+#: solving them with 60 Gauss-Newton iterations instead of 12 moves the cost by a few 1e-6
+#: of itself, so a tighter tolerance only chases that noise.
 FTOL = 1e-6
 
 
@@ -218,12 +216,8 @@ class Problem:
             # each activation's own angle (:func:`~.data.find_activations`), not the row's:
             # a host logs its schedule when it sends it, the wheel's state when it arrives,
             # so with a link delay the rows at an activation's end can already carry the
-            # next command's angle (ad hoc: 10 ms of delay each way, 5 x 60 s, plant seed 11,
-            # three rows of the last priming activation read phi_a 9 deg instead of 3 deg,
-            # its contact angle still below 9 deg: the braking force this gave bent the
-            # whole trial's fit, a 40 ms rise lag came out at 64 ms in that trial alone and
-            # 40-74 ms over the five, and it was refused as a stand-in), and the rows after
-            # the schedule is cleared have none
+            # next command's angle (a braking force from it would bend the whole trial's
+            # fit), and the rows after the schedule is cleared have none
             on_time = np.zeros(m)
             phi_a = np.zeros(m)
             for act in tr.activations:
@@ -629,9 +623,7 @@ def at_rest_trimmed(tr: Trial, band: float = REST_BAND) -> Trial:
     ending the rest there would keep a tail of rest whose constant residual correlates the
     whole fit's (a 0.2 % glitch rate raised the mean autocorrelation
     :func:`~.residual.analyse` reports from 0.002 to 0.019 on clean 3 x 34 s data, plant seed
-    11, and so reported structure where there was none).  On 65 plant trials (ad hoc; 3 x 34 s
-    and 5 x 60 s, plain and realistic, five seeds) the trimming is the same as judged on
-    every sample."""
+    11, and so reported structure where there was none)."""
     rest = rest_start(tr.t, tr.angle, band)
     if rest is None or rest == 0:
         return tr
