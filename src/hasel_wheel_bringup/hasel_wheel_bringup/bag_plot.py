@@ -39,7 +39,7 @@ from hasel_wheel_sim import layout as L  # noqa: E402
 from hasel_wheel_sim.model import SECTOR, force_law, param_vector  # noqa: E402
 from hasel_wheel_sim.params import WheelParams  # noqa: E402
 
-from hasel_wheel_mpc.controller import ControllerConfig  # noqa: E402
+from hasel_wheel_mpc.config import ControllerConfig  # noqa: E402
 
 DPI = 110
 SUFFIXES = {"/" + tp.name: key for tp, key in (

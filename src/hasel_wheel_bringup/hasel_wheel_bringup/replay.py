@@ -28,7 +28,8 @@ from hasel_wheel_bag.export import flatten
 from hasel_wheel_bag.layout import BagError
 from hasel_wheel_bag.reader import bag_configuration, read_messages
 
-from hasel_wheel_mpc.controller import ControllerConfig, SpeedController, controller_from_ros_files
+from hasel_wheel_mpc.config import ControllerConfig, controller_from_ros_files
+from hasel_wheel_mpc.controller import SpeedController
 
 SUFFIX_TELEMETRY = "/" + topics.TELEMETRY.name
 SUFFIX_REFERENCE = "/" + topics.REFERENCE.name
@@ -256,7 +257,7 @@ def _replay_one(path, ns: str, cfg: ControllerConfig, source: str, overrides: di
             rep.samples += 1
             e = r.estimate
             mine = samples.state_msg(e.t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter,
-                                     e.eta_unwrapped, r.d_before, e.xi2_std, e.quality,
+                                     e.eta_unwrapped, e.xi2_std, e.quality,
                                      e.accel_disturbance, e.accel_coefficients)
             key = _stamp_ns(m.header.stamp)       # an estimate is stamped as its sample
             if key in recorded_est:
@@ -272,7 +273,7 @@ def _replay_one(path, ns: str, cfg: ControllerConfig, source: str, overrides: di
                 d = r.decision
                 mine_dec = samples.mpc_status_msg(s.t, d.command, ref, d.predicted_speed, d.cost,
                                                   d.compute_time, d.deadline_slack, d.candidates,
-                                                  d.deadline_missed, d.braking)
+                                                  d.deadline_missed, d.braking, r.d)
                 mine_dec["t"] = t_ns
                 if k < len(statuses):
                     rec_t, rec = statuses[k]

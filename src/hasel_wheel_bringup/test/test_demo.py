@@ -9,7 +9,7 @@ from rosbags.highlevel import AnyReader
 
 from hasel_wheel_bringup import cli
 from hasel_wheel_sim import paper
-from hasel_wheel_mpc.controller import ControllerConfig
+from hasel_wheel_mpc.config import ControllerConfig
 from hasel_wheel_sim.params import packaged
 
 

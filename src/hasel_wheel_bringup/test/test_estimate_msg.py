@@ -10,7 +10,7 @@ from hasel_wheel_common import samples
 from hasel_wheel_common import topics
 from hasel_wheel_bag.reader import read_messages
 from hasel_wheel_bag.writer import BagWriter
-from hasel_wheel_mpc.controller import SWITCH_ON, decide_at
+from hasel_wheel_mpc.core import SWITCH_ON, decide_at
 from hasel_wheel_mpc.mpc import Mpc
 from hasel_wheel_mpc.observer import Observer, ObserverConfig
 from hasel_wheel_bringup.replay import FieldDiff, _compare
@@ -50,7 +50,7 @@ def test_the_coefficients_arrive_exactly_and_the_node_decides_as_the_embedded_lo
     e = estimate
     assert all(abs(c) > 1e-4 for c in e.accel_coefficients)       # all five in use
     msg = samples.state_msg(e.t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter,
-                            e.eta_unwrapped, 0.0, e.xi2_std, e.quality, e.accel_disturbance,
+                            e.eta_unwrapped, e.xi2_std, e.quality, e.accel_disturbance,
                             e.accel_coefficients)
     got = _through_a_bag(tmp_path, msg)
     coeffs = samples.accel_coefficients_of(got)

@@ -9,7 +9,7 @@ from hasel_wheel_ident import data as D
 from hasel_wheel_ident import fit as F
 from hasel_wheel_ident import synthetic as S
 from hasel_wheel_mpc.closed_loop import run_closed_loop
-from hasel_wheel_mpc.controller import START_ANGLES
+from hasel_wheel_mpc.core import START_ANGLES
 from hasel_wheel_mpc.recorder import Recorder
 from hasel_wheel_bringup.trials import TrialSpec, run_trial
 from hasel_wheel_sim.effects import effects_from_mapping

@@ -17,7 +17,7 @@ from hasel_wheel_bag.reader import bag_configuration, read_messages
 from hasel_wheel_bringup.bag_cli import main as bag_main
 from hasel_wheel_sim.params import packaged
 from hasel_wheel_mpc.closed_loop import run_closed_loop
-from hasel_wheel_mpc.controller import ControllerConfig
+from hasel_wheel_mpc.config import ControllerConfig
 from hasel_wheel_mpc.mpc import Mpc, MpcConfig
 from hasel_wheel_mpc.observer import ObserverConfig
 from hasel_wheel_mpc.recorder import Recorder
@@ -90,7 +90,7 @@ def test_a_changed_brake_threshold_differs_from_a_decision_on(recorded):
 def test_no_estimator_changes_the_disturbance_first(recorded):
     path, _ = recorded
     [rep] = replay_bag(path, {"estimator.gain": None})
-    assert rep.estimate_diffs["disturbance"].first_t == rep.first_difference
+    assert rep.decision_diffs["disturbance"].first_t == rep.first_difference
 
 
 def test_playback_clock_replays_compute_times():
@@ -171,14 +171,14 @@ def test_replay_cli(recorded, capsys):
 def test_the_packaged_ros_parameter_files_are_the_core_defaults():
     """observer.yaml and mpc.yaml (what the nodes load) build the same controller as the
     core's defaults, so a ROS bag replays with what the nodes ran."""
-    from hasel_wheel_mpc.controller import controller_from_ros_files
+    from hasel_wheel_mpc.config import controller_from_ros_files
     obs = packaged("hasel_wheel_mpc", "observer.yaml").read_text()
     mpc = packaged("hasel_wheel_mpc", "mpc.yaml").read_text()
     assert controller_from_ros_files(obs, mpc) == ControllerConfig()
     changed = controller_from_ros_files(
-        obs.replace("accel_noise: 0.05", "accel_noise: 0.08").replace("estimator_gain: 0.07",
-                                                                      "estimator_gain: 0.0"),
-        mpc.replace("brake_threshold: 0.2", "brake_threshold: 0.25"))
+        obs.replace("accel_noise: 0.05", "accel_noise: 0.08"),
+        mpc.replace("brake_threshold: 0.2", "brake_threshold: 0.25").replace(
+            "estimator_gain: 0.07", "estimator_gain: 0.0"))
     assert changed.observer.accel_noise == 0.08 and changed.estimator_gain is None
     assert changed.mpc.brake_threshold == 0.25
     with pytest.raises(ParameterError, match="no 'mpc_node: ros__parameters:' section"):

@@ -137,8 +137,7 @@ def command_msg(c: Command, t: float) -> dict:
 
 
 def state_msg(t: float, xi1: float, xi2: float, q: int, act_counter: float,
-              deact_counter: float, eta_unwrapped: int, disturbance: float = 0.0,
-              xi2_stddev: float = 0.0, quality: float = 1.0,
+              deact_counter: float, eta_unwrapped: int, xi2_stddev: float = 0.0, quality: float = 1.0,
               accel_disturbance: float = 0.0,
               accel_coefficients: Sequence[float] = (0.0,) * 5) -> dict:
     """hasel_wheel_msgs/msg/HybridStateEstimate as a dict.  ``accel_coefficients`` are the
@@ -150,7 +149,7 @@ def state_msg(t: float, xi1: float, xi2: float, q: int, act_counter: float,
     return {"header": header(t, "wheel"), "xi1": xi1, "xi2": xi2, "q": q,
             "activation_counter": act_counter, "deactivation_counter": deact_counter,
             "eta": eta_unwrapped % 16, "eta_unwrapped": eta_unwrapped,
-            "disturbance": disturbance, "accel_disturbance": accel_disturbance,
+            "accel_disturbance": accel_disturbance,
             **dict(zip(ACCEL_FIELDS, c)),
             "xi2_stddev": xi2_stddev, "quality": quality}
 
@@ -169,9 +168,10 @@ def accel_coefficients_of(m: Any) -> tuple[float, ...] | None:
 
 def mpc_status_msg(t: float, c: Command, reference: float, predicted: float, cost: float,
                    compute_time: float, slack: float, candidates: int, missed: bool,
-                   braking: bool) -> dict:
-    """hasel_wheel_msgs/msg/MpcStatus as a dict (speeds rad/s, times s)."""
+                   braking: bool, disturbance: float = 0.0) -> dict:
+    """hasel_wheel_msgs/msg/MpcStatus as a dict (speeds rad/s, times s; ``disturbance`` the
+    estimator's d [rad/s] the decision used)."""
     return {"header": header(t, ""), "command": command_msg(c, t), "reference_speed": reference,
-            "predicted_speed": predicted, "cost": cost, "compute_time": compute_time,
+            "predicted_speed": predicted, "disturbance": disturbance, "cost": cost, "compute_time": compute_time,
             "deadline_slack": slack, "candidates_evaluated": candidates,
             "deadline_missed": missed, "braking": braking}

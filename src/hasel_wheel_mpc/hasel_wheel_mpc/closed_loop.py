@@ -17,10 +17,12 @@ from hasel_wheel_common import samples
 from hasel_wheel_common.samples import Command
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.wheel import TICK
 
-from hasel_wheel_mpc.controller import START_ANGLES, ControllerConfig, SpeedController
+from hasel_wheel_mpc.config import ControllerConfig
+from hasel_wheel_mpc.controller import SpeedController
 from hasel_wheel_mpc.disturbance import TRACKING_GAIN
 from hasel_wheel_mpc.mpc import MpcConfig
 from hasel_wheel_mpc.observer import ObserverConfig
@@ -130,10 +132,10 @@ class WheelLoop:
         if recorder is not None:
             recorder.configuration({f"{ns}/controller.yaml": cfg.to_yaml()})
         self.log = LoopLog()
-        self._pending: Command | None = Command(1, *START_ANGLES, 0)       # start the wheel
+        # the start command goes out before the first sample; recorded as mpc_node publishes
+        # it, so every pad a bag's commands drive has its angles
+        self._pending: Command | None = self.ctrl.start(self.plant.wheel.s[L.S_XI1], w0)
         if recorder is not None:
-            # recorded as the MPC node publishes its own: a bag without it left the pads the
-            # start command drives without angles, and the identification refused the bag
             recorder.command(ns, self._pending, 0.0)
         self._last_ref = None
 
@@ -149,7 +151,7 @@ class WheelLoop:
         if rec is not None:
             rec.telemetry(ns, s)
             rec.true_state(ns, self.plant.t, self.plant.wheel.state)
-            rec.estimate(ns, r.estimate, r.d_before, s.t)
+            rec.estimate(ns, r.estimate, s.t)
             if ref != self._last_ref:
                 rec.reference(ns, s.t, ref)
         self._last_ref = ref
@@ -158,11 +160,14 @@ class WheelLoop:
         log.est_speed.append(r.speed)
         log.reference.append(ref)
         log.d.append(r.d_before)
+        if r.command is not None:
+            self._pending = r.command
         if r.decision is not None:
-            self._pending = r.decision.command
             log.decisions.append((s.t, r.decision))
             if rec is not None:
-                rec.decision(ns, s.t, r.decision, ref)
+                rec.decision(ns, s.t, r.decision, ref, r.d)
+        elif r.command is not None and rec is not None:
+            rec.command(ns, r.command, s.t)
 
 
 def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11_DURATION,

@@ -31,15 +31,17 @@ from dataclasses import dataclass
 #: 0.1 gave 13); their NRMSE there is alike, and only 0.07 was swept over falls and other
 #: speeds (bench_speed_loop.py).
 TRACKING_GAIN = 0.07
+#: The band around the reference the estimator runs in [rad/s] (the paper's ~0.1 m/s).
+ESTIMATOR_GATE = 0.64
 
 
 @dataclass
 class IntegralEstimator:
     """(57)-(58) with gating.  gain K [1 per update], gate [rad/s]."""
 
-    gain: float = 0.2
-    gate: float = 0.64
-    mode: str = "paper"      # "paper" ((57)-(58)) or "tracking"
+    gain: float = TRACKING_GAIN
+    gate: float = ESTIMATOR_GATE
+    mode: str = "tracking"   # "tracking" (ours) or "paper" ((57)-(58))
     d: float = 0.0
     updates: int = 0
 

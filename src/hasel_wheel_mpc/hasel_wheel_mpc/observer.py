@@ -21,12 +21,12 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from hasel_wheel_common.samples import ENCODER_COUNT as COUNT
-from hasel_wheel_common.samples import PadEdges, TelemetrySample
+from hasel_wheel_common.samples import PadEdges, TelemetrySample, accel_coefficients_of
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import rk4
 from hasel_wheel_sim.model import SECTOR, Extensions, reading_param_vector
@@ -74,12 +74,24 @@ class Estimate(NamedTuple):
     act_counter: float
     deact_counter: float
     eta_unwrapped: int
-    disturbance: float       # speed offset d_hat of the disturbance estimator [rad/s] (0 here)
     xi2_std: float
     quality: float
     accel_disturbance: float = 0.0      # a_d at xi1: unmodelled acceleration [rad/s^2]
     accel_disturbance_std: float = 0.0  # one-sigma uncertainty of its constant part [rad/s^2]
     accel_coefficients: tuple = (0.0,) * 5   # (c, a, b, e, f) of a_d [rad/s^2]
+
+
+def estimate_from_msg(m: Any) -> Estimate:
+    """An :class:`Estimate` from a HybridStateEstimate message (attribute access; float64
+    fields, so exactly what the observer computed).  A message from before the five a_d
+    coefficients carries ``accel_disturbance`` as the constant part.  Test:
+    ``test_estimate_msg.py``."""
+    coeffs = accel_coefficients_of(m) or (float(m.accel_disturbance), 0.0, 0.0, 0.0, 0.0)
+    stamp = m.header.stamp
+    return Estimate(stamp.sec + stamp.nanosec * 1e-9, float(m.xi1), float(m.xi2), int(m.q),
+                    float(m.activation_counter), float(m.deactivation_counter),
+                    int(m.eta_unwrapped), float(m.xi2_stddev), float(m.quality),
+                    float(m.accel_disturbance), 0.0, coeffs)
 
 
 class Observer:
@@ -236,7 +248,7 @@ class Observer:
         deact = base + phi_d - xi1
         bad = self._recent_bad / max(len(self._recent), 1)
         quality = max(0.0, 1.0 - 5.0 * bad)
-        return Estimate(z.t, xi1, float(self.x[1]), z.q, act, deact, z.eta_unwrapped, 0.0,
+        return Estimate(z.t, xi1, float(self.x[1]), z.q, act, deact, z.eta_unwrapped,
                         float(math.sqrt(max(self.P[1, 1], 0.0))), quality,
                         disturbance_at(self.x[2:], xi1, self.pv[L.P_PIVOT_RATIO]),
                         float(math.sqrt(max(self.P[2, 2], 0.0))),

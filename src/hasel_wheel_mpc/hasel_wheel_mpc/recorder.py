@@ -113,26 +113,27 @@ class Recorder:
                        samples.state_msg(t, x.xi1, x.xi2, x.q, x.act_counter, x.deact_counter,
                                          x.eta), self._ns_time(t))
 
-    def estimate(self, ns: str, e, d: float = 0.0, t: float | None = None) -> None:
-        """Record an observer estimate (observer.Estimate) with the estimator's d [rad/s],
-        stamped ``t`` [s]: the telemetry sample's stamp, as observer_node stamps it (default
-        the estimate's own time)."""
+    def estimate(self, ns: str, e, t: float | None = None) -> None:
+        """Record an observer estimate (observer.Estimate) stamped ``t`` [s]: the telemetry
+        sample's stamp, as observer_node stamps it (default the estimate's own time)."""
         self._ensure(ns, topics.STATE_ESTIMATE)
         t = e.t if t is None else t
         self.bag.write(topics.qualified(topics.STATE_ESTIMATE, ns),
                        samples.state_msg(t, e.xi1, e.xi2, e.q, e.act_counter, e.deact_counter,
-                                         e.eta_unwrapped, d, e.xi2_std, e.quality,
+                                         e.eta_unwrapped, e.xi2_std, e.quality,
                                          e.accel_disturbance, e.accel_coefficients),
                        self._ns_time(t))
 
-    def decision(self, ns: str, t: float, dec, reference: float) -> None:
-        """Record an MPC decision (mpc.Decision) on ``mpc_status`` and its ``command``."""
+    def decision(self, ns: str, t: float, dec, reference: float, d: float = 0.0) -> None:
+        """Record an MPC decision (mpc.Decision) made with the estimator's ``d`` [rad/s] on
+        ``mpc_status``, and its ``command``."""
         self._ensure(ns, topics.MPC_STATUS, topics.COMMAND)
         tn = self._ns_time(t)
         self.bag.write(topics.qualified(topics.MPC_STATUS, ns),
                        samples.mpc_status_msg(t, dec.command, reference, dec.predicted_speed,
                                               dec.cost, dec.compute_time, dec.deadline_slack,
-                                              dec.candidates, dec.deadline_missed, dec.braking),
+                                              dec.candidates, dec.deadline_missed, dec.braking,
+                                              d),
                        tn)
         self.bag.write(topics.qualified(topics.COMMAND, ns), samples.command_msg(dec.command, t), tn)
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from hasel_wheel_mpc.closed_loop import WheelLoop, controller_config
-from hasel_wheel_mpc.controller import (BETWEEN_PADS, IDLE, NEW_REFERENCE, REDECIDE_MIN_TIME,
-                                        SWITCH_ON, decision_point)
+from hasel_wheel_mpc.core import (BETWEEN_PADS, IDLE, NEW_REFERENCE, REDECIDE_MIN_TIME,
+                                  SWITCH_ON, decision_point)
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping
 from hasel_wheel_sim.plant import PlantConfig

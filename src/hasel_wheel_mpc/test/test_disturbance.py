@@ -6,7 +6,7 @@ from hasel_wheel_mpc.disturbance import IntegralEstimator
 
 @pytest.mark.parametrize("gain", [0.05, 0.2, 0.5, 1.0, 1.5])
 def test_constant_offset_closes_geometrically(gain):
-    est = IntegralEstimator(gain=gain)
+    est = IntegralEstimator(gain=gain, mode="paper")
     e = 0.12                       # the wheel runs 0.12 rad/s faster than modelled
     model = 2.0
     for k in range(1, 40):
@@ -15,7 +15,7 @@ def test_constant_offset_closes_geometrically(gain):
 
 
 def test_gated_outside_the_band_near_the_reference():
-    est = IntegralEstimator(gain=0.5, gate=0.64)
+    est = IntegralEstimator(gain=0.5, gate=0.64, mode="paper")
     assert est.step(1.1, 1.0, reference=2.0) == 0.0          # 1.0 rad/s away: off
     assert est.step(1.5, 1.4, reference=2.0) == pytest.approx(0.05)   # 0.6 rad/s: on
     assert est.updates == 1

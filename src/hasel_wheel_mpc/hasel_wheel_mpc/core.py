@@ -1,0 +1,276 @@
+"""The control core: disturbance estimator, decision scheduling, start policy and MPC.
+
+One :class:`ControlCore` object holds everything the speed loop decides after the observer:
+the estimator's cycle window and prediction queue, when the MPC decides (paper Sec. V-B),
+how a wheel is started, and which command angles each sequence number stands for.  The
+embedded runner (:class:`~hasel_wheel_mpc.controller.SpeedController`) and ``mpc_node`` both
+call it the same way, per device sample:
+
+1. :meth:`ControlCore.telemetry` with the raw sample (encoder angle, latched command);
+2. :meth:`ControlCore.step` with the observer's estimate of that sample and the reference;
+   it answers with a command to send, or None.
+
+Tests: ``hasel_wheel_mpc/test/test_core.py`` (start, step change, braking, estimator
+bookkeeping, without ROS) and ``test_controller.py`` (decision points).
+"""
+from __future__ import annotations
+
+import math
+from collections import OrderedDict, deque
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from hasel_wheel_common.samples import Command, PadEdges
+from hasel_wheel_sim.model import SECTOR
+from hasel_wheel_sim.wheel import TICK
+
+from hasel_wheel_mpc.config import ControllerConfig
+from hasel_wheel_mpc.disturbance import IntegralEstimator
+from hasel_wheel_mpc.mpc import Decision, Mpc, next_pad
+from hasel_wheel_mpc.observer import Estimate
+
+D = math.radians
+#: (phi_a, phi_d) [rad] of the start command (sequence 0), and of any latched command whose
+#: sequence number the core did not send.
+START_ANGLES = (D(3.0), D(22.0))
+#: Decide on an idle wheel after this many samples with HV off [samples].
+IDLE_SAMPLES = 150
+#: Re-decide on a new reference only if the next switching is at least this far away [s].
+REDECIDE_MIN_TIME = 0.02
+#: Send the start command again after this many samples without its pad latched [samples].
+START_PERIOD = 30
+#: Extra lead of the start command over the MPC's deadline margin (its way to the device) [s].
+START_LEAD = 0.1
+#: Encoder samples the start policy reads the wheel's speed from [samples].
+START_SAMPLES = 30
+#: Command angles remembered by sequence number (the latched one is always recent) [count].
+ANGLES_KEPT = 64
+
+#: Why the MPC decides at a sample (:func:`decision_point`).
+SWITCH_ON, IDLE, NEW_REFERENCE, BETWEEN_PADS = "switch_on", "idle", "new_reference", "between_pads"
+#: Why the core sends a start command (:attr:`CoreStep.why` while the wheel is not started).
+START = "start"
+
+
+def decision_point(reference_changed: bool, q: int, switched_on: bool, idle: int,
+                   idle_samples: int, act_counter: float, deact_counter: float, speed: float,
+                   min_time: float) -> str | None:
+    """Why the MPC decides at this sample, or None.
+
+    SWITCH_ON: the actuator of interest just switched on (paper Sec. V-B).  IDLE: HV has been
+    off for ``idle_samples`` samples.  On a new reference, if there is at least ``min_time``
+    [s] at ``speed`` [rad/s] before the next switching: NEW_REFERENCE while an actuator is on
+    (``deact_counter`` [rad] to its switch-off; the waiting command is replaced), and
+    BETWEEN_PADS while none is (``act_counter`` [rad] to the pending switch-on; that target
+    is replaced, by a braking pad only, because the MPC predicts from a pad that is on).
+    Test: ``test_controller.py::test_decision_points``.
+    """
+    if switched_on:
+        return SWITCH_ON
+    if idle == idle_samples:
+        return IDLE
+    if reference_changed:
+        lead = min_time * max(speed, 0.1)
+        if q == 1 and deact_counter > lead:
+            return NEW_REFERENCE
+        if q == 0 and act_counter > lead:
+            return BETWEEN_PADS
+    return None
+
+
+def decide_at(mpc: Mpc, why: str, xi1: float, speed: float, eta_unwrapped: int,
+              phi_a_now: float, phi_d_now: float, reference: float, d: float,
+              disturbance: tuple, act_counter: float) -> Decision | None:
+    """The MPC's decision at a :func:`decision_point` ``why``, or None.
+
+    Between two pads only a braking command replaces the pending target, and only when the
+    speed (+ d) is ``brake_threshold`` above the reference.  On an idle wheel a driving
+    command latches on arrival and the telemetry's pad is stale, so its pad is the first whose
+    switch-on is still ahead then (:func:`~hasel_wheel_mpc.mpc.next_pad`).  Angles rad (xi1
+    unwrapped), speeds rad/s, ``act_counter`` rad to the pending switch-on, ``disturbance``
+    the observer's a_d coefficients [rad/s^2].
+    """
+    if why == BETWEEN_PADS:
+        if speed + d < reference + mpc.config.brake_threshold:
+            return None
+        return mpc.brake_now(xi1, speed, d, act_counter)
+    dec = mpc.decide(xi1, speed, eta_unwrapped, phi_a_now, phi_d_now, reference, d,
+                     disturbance, pad_on=why != IDLE)
+    if why == IDLE and not dec.braking:
+        n_a = next_pad(xi1, speed, dec.command.phi_a, TICK + mpc.config.deadline_margin)
+        dec = dec._replace(command=dec.command._replace(n_a=n_a))
+    return dec
+
+
+class CoreStep(NamedTuple):
+    """What the core made of one estimate."""
+
+    command: Command | None      # the command to send now, if any
+    why: str | None              # START, or the decision point (SWITCH_ON, IDLE, ...)
+    decision: Decision | None    # the MPC's decision behind ``command`` (None for START)
+    d_before: float              # the estimator's d [rad/s] when the estimate arrived
+    d: float                     # d [rad/s] after this estimate (changes at switch-offs)
+    speed: float                 # xi2 the MPC sees [rad/s] (observer or finite difference)
+
+
+class ControlCore:
+    """Disturbance estimator, decision scheduling, start policy and MPC of one wheel.
+
+    The MPC decides where :func:`decision_point` says.  Until the first switch-on, at every
+    other sample the core sends a start command (sequence 0, the pad whose activation angle
+    ``START_ANGLES[0]`` is next ahead, at ``START_ANGLES``) whenever no pad is latched within
+    the next two sectors, at once when the wanted pad changes and otherwise every
+    ``START_PERIOD`` samples.  The estimator updates at each switch-off of the actuator of
+    interest from the mean speed over the cycle that ended and the prediction made for it.
+    ``clock`` [s] is the MPC's clock for its deadline (default wall time).
+    """
+
+    def __init__(self, config: ControllerConfig | None = None,
+                 clock: Callable[[], float] | None = None) -> None:
+        cfg = self.config = config or ControllerConfig()
+        self.mpc = Mpc(cfg.params, cfg.extensions, config=cfg.mpc,
+                       **({"clock": clock} if clock is not None else {}))
+        self.estimator = (IntegralEstimator(gain=cfg.estimator_gain, mode=cfg.estimator_mode,
+                                            gate=cfg.estimator_gate)
+                          if cfg.estimator_gain else None)
+        self.idle_samples = IDLE_SAMPLES
+        self.redecide_min_time = REDECIDE_MIN_TIME
+        self.started = False
+        self.starts = 0                    # start commands sent [count]
+        self._angles: OrderedDict[int, tuple[float, float]] = OrderedDict({0: START_ANGLES})
+        self._latched = 0
+        self._edges = PadEdges()
+        self._idle = 0
+        self._cycle: list[float] = []
+        self._queued: list[float | None] = []    # predictions of cycles starting at switch-offs
+        self._window_pred: float | None = None
+        self._encoder: deque[tuple[float, float]] = deque(maxlen=START_SAMPLES)
+        self._fd = 0.0
+        self._last_ref: float | None = None
+        self._new_ref = False
+        self._start_pad, self._start_idle = -1, 0
+
+    @property
+    def d(self) -> float:
+        """The disturbance estimate [rad/s] (0 without an estimator)."""
+        return self.estimator.d if self.estimator else 0.0
+
+    def set_estimator(self, gain: float, mode: str, gate: float, dry_run: bool = False) -> None:
+        """Change the disturbance estimator at run time: gain K [1 per cycle] (0 = off), mode
+        'tracking' or 'paper', gate [rad/s]; d is kept.  Raises ValueError on a bad value
+        (``dry_run``: only check)."""
+        est = IntegralEstimator(gain=gain, gate=gate, mode=mode) if gain > 0.0 else None
+        if dry_run:
+            return
+        if est is not None and self.estimator is not None:
+            est.d, est.updates = self.estimator.d, self.estimator.updates
+        self.estimator = est
+
+    def angles_of(self, sequence: int) -> tuple[float, float]:
+        """(phi_a, phi_d) [rad] of the command with this sequence number (START_ANGLES for
+        one the core did not send)."""
+        return self._angles.get(sequence, START_ANGLES)
+
+    def telemetry(self, t: float, angle: float, latched_sequence: int) -> None:
+        """A raw device sample: device time ``t`` [s], encoder ``angle`` [rad] (unwrapped) and
+        the sequence number of the latched command.  Feeds the finite-difference speed and
+        the start policy's speed."""
+        if self._encoder and t > self._encoder[-1][0]:
+            self._fd = (angle - self._encoder[-1][1]) / (t - self._encoder[-1][0])
+        self._encoder.append((t, angle))
+        self._latched = latched_sequence
+
+    def start_command(self, angle: float, speed: float) -> Command:
+        """The start command for a wheel at ``angle`` [rad] turning at ``speed`` [rad/s]."""
+        lead = self.mpc.config.deadline_margin + START_LEAD
+        return Command(next_pad(angle, speed, START_ANGLES[0], lead), *START_ANGLES, 0)
+
+    def step(self, e: Estimate, reference: float) -> CoreStep:
+        """One estimate ``e`` (of the sample last given to :meth:`telemetry`) with the
+        reference [rad/s] in force at its time."""
+        d_before = self.d
+        observer = self.config.speed_source == "observer"
+        speed = e.xi2 if observer else self._fd
+        self._cycle.append(speed)
+        self._idle = 0 if e.q else self._idle + 1
+        switched_on, switched_off = self._edges.step(e.q, e.eta_unwrapped)
+        self._track_reference(reference)
+        if switched_off:
+            self._end_cycle(speed, reference)
+        d = self.d
+        self.started = self.started or bool(e.q)
+        why = decision_point(self._new_ref, e.q, switched_on, self._idle, self.idle_samples,
+                             e.act_counter, e.deact_counter, speed, self.redecide_min_time)
+        if why is None and not self.started:
+            cmd = self._start(e)
+            return CoreStep(cmd, START if cmd else None, None, d_before, d, speed)
+        if why is None:
+            return CoreStep(None, None, None, d_before, d, speed)
+        self._new_ref = False
+        pa_now, pd_now = self.angles_of(self._latched)
+        dec = decide_at(self.mpc, why, e.xi1, speed, e.eta_unwrapped, pa_now, pd_now,
+                        reference, d, e.accel_coefficients if observer else (0.0, 0.0, 0.0),
+                        e.act_counter)
+        if dec is None:
+            return CoreStep(None, why, None, d_before, d, speed)
+        self._sent(dec.command)
+        self._queue(why, None if dec.braking else dec.predicted_speed - d)
+        self._idle = 0
+        return CoreStep(dec.command, why, dec, d_before, d, speed)
+
+    def _track_reference(self, reference: float) -> None:
+        """A new reference counts until the next decision; cycles predicted for the old one
+        say nothing about the model's error against the new one, the one ending now too."""
+        last = reference if self._last_ref is None else self._last_ref
+        self._last_ref = reference
+        if reference != last:
+            self._new_ref = True
+            self._window_pred = None
+            self._queued = [None] * len(self._queued)
+
+    def _end_cycle(self, speed: float, reference: float) -> None:
+        """At a switch-off: the window [previous switch-off, this one) is a cycle some
+        decision predicted; the estimator compares its mean speed with that prediction."""
+        if self.estimator and self._window_pred is not None and len(self._cycle) > 1:
+            self.estimator.step(float(np.mean(self._cycle[:-1])), self._window_pred, reference)
+        self._window_pred = self._queued.pop(0) if self._queued else None
+        self._cycle = [speed]
+
+    def _queue(self, why: str, prediction: float | None) -> None:
+        """File a decision's model-only prediction [rad/s] (None: a braking cycle) for the
+        cycle it starts."""
+        if why == BETWEEN_PADS:           # the pending pad's cycle is now a braking one
+            self._window_pred = None
+        elif why == NEW_REFERENCE and self._queued:
+            self._queued[-1] = prediction
+        else:
+            self._queued.append(prediction)
+
+    def _sent(self, cmd: Command) -> None:
+        self._angles[cmd.sequence] = (cmd.phi_a, cmd.phi_d)
+        while len(self._angles) > ANGLES_KEPT:
+            self._angles.popitem(last=False)
+
+    def _start(self, e: Estimate) -> Command | None:
+        """The start policy's command at this estimate, or None: a pad is latched whose
+        switch-on is within two sectors ahead, or passed by less than the wheel turns in
+        ``START_LEAD`` (the estimate may lead the wheel; the pad is switching on now), or
+        the command sent is still on its way."""
+        (t0, a0), (t1, a1) = ((self._encoder[0], self._encoder[-1]) if len(self._encoder) > 1
+                              else ((0.0, e.xi1), (0.0, e.xi1)))
+        speed = (a1 - a0) / (t1 - t0) if t1 - t0 >= 0.02 else max(e.xi2, 0.0)
+        if -max(speed, 0.0) * START_LEAD < e.act_counter <= 2.0 * SECTOR:
+            return None
+        cmd = self.start_command(a1, speed)
+        if cmd.n_a == self._start_pad and self._idle - self._start_idle < START_PERIOD:
+            return None                                          # in flight
+        return self.sent_start(cmd)
+
+    def sent_start(self, cmd: Command) -> Command:
+        """Record that the start command ``cmd`` goes out now (the embedded runner sends
+        the first one before the first sample); returns it."""
+        self._start_pad, self._start_idle = cmd.n_a, self._idle
+        self._sent(cmd)
+        self.starts += 1
+        return cmd
