@@ -1,4 +1,4 @@
-"""Benchmark of the speed loop's parts built so far (observer, estimator, MPC, closed loop).
+"""Benchmark of the speed loop and its parts (observer, estimator, MPC, closed loop).
 
 Prints:
 * observer speed RMSE at ~2 rad/s through the 10-bit encoder (exact and realistic plant)
@@ -8,7 +8,10 @@ Prints:
 * MPC decision latency p50/p99 and candidates per decision over that run, the time available
   before the current actuator switches off at 0.7 m/s, and how many candidates fit in 2 ms;
 * the 1.0 rad/s error budget, and a sweep over plant seeds 0-15 of the demo's 1.0 rad/s window
-  and 2.6 -> 2.0 rad/s fall for the default controller and variants (two processes, ~12 min).
+  and 2.6 -> 2.0 rad/s fall for the default controller and variants (on two processes; the
+  longest part of the run).
+
+The current figures, each beside its command, are in ``docs/benchmarks.md``.
 
 Run: ``./dev bench`` or ``.venv/bin/python benchmarks/bench_speed_loop.py``.
 """
@@ -182,7 +185,8 @@ def one_rad_s_budget() -> list[tuple[str, list[float], float, float, float]]:
 
 
 #: Controllers the seed sweep runs on the whole Fig. 11 profile (1.0 rad/s window and fall):
-#: (label, overrides of the default).  The last three are earlier defaults.
+#: (label, overrides of the default).  Each row after the first changes one choice of the
+#: default back to an alternative, to show what that choice is worth.
 SWEEP_FULL = (("default", {}),
               ("refinement +-0.75 x {20,21,22} (was)",
                {"mpc.refine_phi_a": [math.radians(0.25 * k) for k in range(-3, 4)],
@@ -237,7 +241,7 @@ def seed_sweep(seeds=range(16)) -> dict[str, np.ndarray]:
 
 def one_cycle_latencies(plant: PlantConfig) -> np.ndarray:
     """Compute times [s] of the driving decisions of the Fig. 11 run with the one-cycle
-    horizon and its terminal term (the earlier default), estimator on."""
+    horizon and its terminal term (w_T 1.0), estimator on."""
     from hasel_wheel_mpc.closed_loop import controller_config, run_controller
     cfg = controller_config().with_overrides({"mpc.horizon_pads": 1, "mpc.terminal_weight": 1.0})
     log = run_controller(cfg, plant_config=plant)

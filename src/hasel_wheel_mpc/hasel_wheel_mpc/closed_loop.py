@@ -3,7 +3,9 @@
 Everything runs in lockstep simulated time at 300 Hz.  The controller
 (:class:`~hasel_wheel_mpc.controller.SpeedController`) decides at each switch-on reported in
 telemetry (paper Sec. V-B); the command reaches the plant through its serial-latency effect
-and is latched at the current actuator's switch-off.
+and is latched at the current actuator's switch-off.  The ROS nodes call the same control
+core and send the same commands
+(``test_core.py::test_the_node_path_sends_the_embedded_runners_commands``).
 """
 from __future__ import annotations
 

@@ -7,13 +7,17 @@
 ``k`` counts cycles: xi2_meas is the measured mean speed over a cycle and xi2_prdt the mean the
 MPC predicted for it (model + d).  It runs only near the reference, |xi2_prdt - xi2_r| <=
 ``gate`` (the paper: ~0.1 m/s = 0.64 rad/s), so the transient does not wind it up.  With a
-constant model error e, d(k) = e (1 - (1 - K)^k) for 0 < K < 2.
+constant model error e, d(k) = e (1 - (1 - K)^k) for 0 < K < 2
+(``test_disturbance.py::test_constant_offset_closes_geometrically``,
+``test_gated_outside_the_band_near_the_reference``).
 
 ``mode="tracking"`` (ours, the default): e(k) = xi2_meas(k) - xi2_r, gated on the measured
 speed.  (58) only removes the error between model and wheel; the controller's own bias (a
 cost that prefers a slightly slow cycle, a coarse search grid) stays.  Integrating the
 tracking error removes both.  If the MPC meets its prediction, xi2_meas = xi2_r - d + e, and
-the same geometric law d(k) = e (1 - (1 - K)^k) follows.
+the same geometric law d(k) = e (1 - (1 - K)^k) follows
+(``test_tracking_mode_closes_a_constant_offset_at_the_same_rate``,
+``test_tracking_mode_is_gated_on_the_measured_speed``).
 
 How d enters the prediction (the paper leaves it open): as an additive speed offset.  The
 MPC predicts xi2_prdt = xi2_model + d and minimises its cost on it.  The observer's
@@ -24,12 +28,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-#: The default gain K of the tracking estimator [1 per cycle].  With the observer's pivot
-#: harmonic carrying the platform's pull, a faster d only chases what the MPC cannot hold
-#: from one cycle to the next: on plant seeds 0-15 at 1.0 rad/s the demo's steady error is
-#: within 0.5 % on all 16 seeds with K = 0.05, 0.07 or 0.1 (MPC over two cycles; over one,
-#: 0.1 gave 13); their NRMSE there is alike, and only 0.07 was swept over falls and other
-#: speeds (bench_speed_loop.py).
+#: The default gain K of the tracking estimator [1 per cycle].  The observer's pivot
+#: harmonic carries the platform's slow pull, so d only has to hold what remains; a faster
+#: d chases cycle-to-cycle scatter.  ``benchmarks/bench_speed_loop.py`` compares K over
+#: plant seeds.
 TRACKING_GAIN = 0.07
 #: The band around the reference the estimator runs in [rad/s] (the paper's ~0.1 m/s).
 ESTIMATOR_GATE = 0.64
@@ -37,7 +39,8 @@ ESTIMATOR_GATE = 0.64
 
 @dataclass
 class IntegralEstimator:
-    """(57)-(58) with gating.  gain K [1 per update], gate [rad/s]."""
+    """(57)-(58) with gating.  gain K [1 per update], gate [rad/s]; 0 < K < 2, else refused
+    (``test_disturbance.py::test_unstable_gains_are_refused``)."""
 
     gain: float = TRACKING_GAIN
     gate: float = ESTIMATOR_GATE

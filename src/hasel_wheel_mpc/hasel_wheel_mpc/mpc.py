@@ -1,58 +1,36 @@
 """Model predictive speed control (paper Sec. V) on the hybrid model, without ROS.
 
-At each switch-on of the current actuator (the paper's decision point) the controller chooses
-u = (n_a, phi_a, phi_d) for the next pad.  It predicts every candidate with the hybrid model
-(compiled, 300 Hz firmware ticks, the candidate latched at the current switch-off) and keeps
-the cheapest.  The paper predicts over the next activation-deactivation cycle
-(``horizon_pads`` = 1).  Our default looks one cycle further (``horizon_pads`` = 2): the
-pad after the candidate repeats the candidate's angles.  Why: the pad a decision chooses
-pushes at the very end of the cycle it is judged on, so that cycle's speed hardly depends on
-it; the push sets the speed of the cycle after.  Judged on one cycle, the choice needs a
-terminal term, and the mix of the two terms makes a cycle's mean speed depend on how fast
-the wheel slows in it.  An off-centre mass then moves the cycle means around the turn, by
-+-1.5 % at 1 rad/s even with a perfect model (std 0.012 rad/s; with two cycles 0.006).
+At each switch-on of the current actuator the controller chooses u = (n_a, phi_a, phi_d) for
+the next pad: it predicts every candidate with the hybrid model (compiled, 300 Hz firmware
+ticks, latched at the current switch-off) and keeps the cheapest.  The reasons for each
+choice are in ``docs/controller.md``.  Angles rad, speeds rad/s, times s.
 
-Search (beyond the paper's 15 phi_a at phi_d = 22 deg): a coarse pass over ``phi_a`` x ``phi_d``
-(by default exactly the paper's 15 candidates), then a joint, finer pass around the best:
-phi_a + ``refine_phi_a`` offsets x ``refine_phi_d`` (by default +-0.25 deg x {21, 22} deg
-and the winner at 21 deg: 5 more, 20 in all).  The finer pass was 7 x 3 (+-0.75 deg in
-0.25 deg steps x {20, 21, 22} deg, 36 in all) until decisions over two cycles took 2.9 ms
-at p99 on a slower machine; over plant seeds 0-15 the smaller pass did as well at 1.0 rad/s
-and in the 2.6 -> 2.0 rad/s fall (``benchmarks/bench_speed_loop.py``'s seed sweep, row
-"refinement ... (was)" for the larger pass).
-
-Cost (59), as we read it: the next cycle has two flow segments, q = 0 (waiting for the
-candidate's switch-on) and q = 1 (the candidate on, until it switches off).  Each segment's
-squared speed error is averaged over its samples, and J = 1/2 (mean_0 + mean_1).  The speed
-before the current switch-off is the same for every candidate, so it is not part of J.
-With ``horizon_pads`` cycles, J is the mean of all their segment means.  Two additions of
-ours, both switchable: ``time_weighted`` (the mean over all the horizon's samples, i.e. the
-NRMSE we are judged on; the default) and a terminal term w_T (xi2_end - xi2_r)^2 at the end
-of the horizon (default off; with one cycle, 1.0 is what keeps the search from a weak push).
-
-Disturbances enter the prediction twice: the estimator's speed offset d [rad/s] is added to
-the predicted speed, and the observer's acceleration disturbance a_d(xi1) [rad/s^2] is added
-to the model's acceleration (see observer.py and disturbance.py).
-
-Braking (Sec. V-A): when the estimated speed is at least ``brake_threshold`` [rad/s] above the
-reference, u = (n_a, ``brake_phi_a``, ``brake_phi_d``) with n_a = eta + 2; no search.
-Defaults 0.2 rad/s, -22.4 deg and -6 deg (the paper: 0.3, -22, -6).  With the threshold at 0.2
-the wheel brakes closer to the new reference, and the 2.6 -> 2.0 rad/s fall stays within
-1.2 s on more plant seeds (``benchmarks/bench_speed_loop.py`` prints both).  Each braking pad
-switches on as early as allowed, which in our braking-force model (mirrored (43)) is much
-the strongest: the force grows with xi_c - phi_a, and its bump peaks near |xi_c| = 21 deg,
-just after a braking pad switches on; there xi_c - phi_a is 1.4 deg instead of 1.0 deg.  The pad and
-phi_a come from where the command latches (:func:`braking_command`): phi_a is never earlier
-than the pad can still switch on, since a target that has passed when the command latches
-would come round only a turn later.  A new reference between two pads is braked on at once
-(:meth:`Mpc.brake_now`) if the speed is above it by the threshold.
-
-Deadline: the decision must be ready ``deadline_margin`` [s] (the command's way to the wheel)
-before the current actuator switches off, as the prediction times it.  A later decision is
-discarded and the fallback is sent instead: the last driving (phi_a, phi_d) again for the next
-pad (the paper's phi_d = 22 deg and the middle of the allowed phi_a if there is none), which
-keeps the wheel rolling as it was; its phi_a is raised to :func:`earliest_phi_a` if the wheel
-is now too fast for it, within ``phi_a_max``.  Every miss is counted (``Mpc.deadline_misses``).
+* Horizon: ``horizon_pads`` cycles, 1 (the paper's) or 2 (default: that cycle and the next,
+  in which the next pad repeats the candidate's angles).  Two cycles hold each cycle's mean
+  speed closer to the reference where an off-centre mass moves it
+  (``test_controller.py::test_two_cycle_horizon_holds_each_cycle_mean_where_an_off_centre_mass_moves_it``).
+* Search: a coarse pass over ``phi_a`` x ``phi_d`` (default the paper's 15 candidates, 1-15
+  deg at 22 deg), then a joint pass around the winner, ``refine_phi_a`` x ``refine_phi_d``
+  (default +-0.25 deg x {21, 22} deg less the pair already predicted: 20 in all;
+  ``test_mpc.py::test_refinement_searches_phi_a_and_phi_d_jointly_around_the_coarse_winner``).
+* Cost (59) [(rad/s)^2]: the mean of the segment means of (xi2 + d - xi2_r)^2 over the
+  horizon's q = 0 and q = 1 segments; ``time_weighted`` (default) takes the mean over all
+  its samples instead; ``terminal_weight`` adds w_T (xi2_end - xi2_r)^2 (default 0)
+  (``test_mpc.py::test_cost_59_by_hand``, ``test_cost_over_two_cycles_by_hand``).
+* Disturbances: the estimator's speed offset d [rad/s] is added to the predicted speed, the
+  observer's a_d(xi1) [rad/s^2] to the model's acceleration (observer.py, disturbance.py).
+* Braking (Sec. V-A): when xi2 + d >= xi2_r + ``brake_threshold`` [rad/s], u = (n_a,
+  ``brake_phi_a``, ``brake_phi_d``), no search; defaults 0.2 rad/s, -22.4 deg, -6 deg (the
+  paper: 0.3, -22, -6).  n_a and phi_a come from :func:`braking_command`: the earliest
+  switch-on the pad still reaches, the strongest in our braking-force model
+  (``test_mpc.py::test_braking_when_the_speed_is_above_the_reference_by_the_threshold``,
+  ``test_braking_pad_switches_on_no_earlier_than_it_still_can``).  A new reference between
+  two pads is braked on at once (:meth:`Mpc.brake_now`).
+* Deadline: the decision must be ready ``deadline_margin`` [s] before the current actuator
+  switches off, as the prediction times it.  A later one is discarded and the fallback sent:
+  the last driving (phi_a, phi_d) for the next pad, phi_a raised to :func:`earliest_phi_a`
+  and kept within ``phi_a_max``; each miss is counted in ``Mpc.deadline_misses``
+  (``test_mpc.py::test_a_late_decision_is_replaced_by_the_fallback_and_counted``).
 """
 from __future__ import annotations
 
@@ -177,11 +155,9 @@ def cost_59(speed: np.ndarray, q: np.ndarray, reference: float, d: float = 0.0,
     ``pads`` = 2, then the next pad's q = 0 and q = 1 segments too.  (59): the mean of the
     segment means of (speed + d - reference)^2 (1/2 (mean_0 + mean_1) for one cycle); with
     ``time_weighted`` the mean over all the segments' samples instead; plus
-    ``terminal_weight`` times the squared error of the last sample before the last
-    switch-off (0 turns it off: (59) alone, e.g. the paper's search with phi_d fixed at
-    22 deg; over one cycle with phi_d searched too, (59) alone picks a weak push that looks
-    good for that cycle and leaves the wheel too slow for the next).  Returns +inf if the
-    horizon does not contain every cycle.
+    ``terminal_weight`` [1] times the squared error of the last sample before the last
+    switch-off (0: none).  Returns +inf if the horizon does not contain every cycle
+    (``test_mpc.py::test_cost_59_by_hand``, ``test_cost_over_two_cycles_by_hand``).
     """
     qi = q.astype(np.int8)
     edges = np.flatnonzero(np.diff(qi)) + 1         # indices where q changes
@@ -215,12 +191,14 @@ def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: fl
     queued when the candidate switches on).  Every candidate's trajectory is identical until
     the current actuator switches off, so that prefix is simulated once; each candidate then
     runs from the start of that tick until its last switch-off and stops.  The samples and
-    the cost are those of :func:`cost_59` on the full-horizon simulation (same ticks; tested),
-    with ``time_weighted`` replacing the mean of the segment means by the mean over all
-    samples.  Writes ``costs`` (n,) [(rad/s)^2] (inf when the cycles do not finish within
-    ``max_ticks``) and ``means`` (n,), the model's mean speed over the first cycle [rad/s]
-    (d not added).  Returns the prefix length in ticks (the time left before the current
-    switch-off, in units of h), or -1 if it does not switch off in time.
+    the cost are those of :func:`cost_59` on the full-horizon simulation (same ticks;
+    ``test_mpc.py::test_shared_prefix_predictor_equals_the_full_horizon_simulation`` and
+    ``test_two_cycle_predictor_equals_a_step_by_step_simulation``), with ``time_weighted``
+    replacing the mean of the segment means by the mean over all samples.  Writes ``costs``
+    (n,) [(rad/s)^2] (inf when the cycles do not finish within ``max_ticks``) and ``means``
+    (n,), the model's mean speed over the first cycle [rad/s] (d not added).  Returns the
+    prefix length in ticks (the time left before the current switch-off, in units of h), or
+    -1 if it does not switch off in time.
     """
     ev = np.zeros((L.EV_MAX_PER_TICK, 4))
     s = s0.copy()
@@ -298,7 +276,8 @@ def predict_cycle_costs(s0: np.ndarray, pv: np.ndarray, cands: np.ndarray, h: fl
 #: and the next target's switch-on angle: the firmware switches off on the first tick past
 #: phi_d and latches the next target then, so a target less than a tick ahead may already
 #: be behind the wheel, and would only come round again a turn later (the wheel coasts for
-#: 16 pads).  Driving and braking targets alike.
+#: 16 pads).  Driving and braking targets alike
+#: (``test_mpc.py::test_a_driving_target_is_never_chosen_behind_the_latch``).
 LATCH_TICKS = 2.0
 
 
@@ -319,7 +298,8 @@ def braking_command(latch: float, xi2: float, phi_a: float, phi_d: float) -> tup
     one after the sector of ``latch`` on, the first that can switch on no later than the
     middle of [phi_a, phi_d] (so the phi_a returned is always below phi_d).  After a driving
     pad that switches off at 22 deg that is eta + 2, as in Sec. III-D, at -22 deg (2.6
-    rad/s: 2 ticks after -23 deg); after a braking pad (off at -6 deg) the next pad, at phi_a.
+    rad/s: 2 ticks after -23 deg); after a braking pad (off at -6 deg) the next pad, at phi_a
+    (``test_mpc.py::test_braking_command_is_valid_and_still_ahead_at_any_latch_angle``).
     """
     limit = 0.5 * (phi_a + phi_d)
     pad = math.floor(latch / SECTOR) + 1
@@ -334,7 +314,8 @@ def next_pad(xi1: float, xi2: float, phi_a: float, lead: float) -> int:
 
     For a driving decision on an idle wheel (no pad on, so the command latches on arrival):
     the pad after the sector floor(xi1 / (pi/8)) would skip a pad that is less than phi_a
-    past the sector boundary, and a slow wheel could then coast to a stop.
+    past the sector boundary, and a slow wheel could then coast to a stop
+    (``test_mpc.py::test_next_pad_is_the_first_whose_switch_on_is_still_ahead``).
     """
     ahead = xi1 + max(xi2, 0.0) * lead
     return (int(math.floor((ahead - phi_a) / SECTOR)) + 1) % 16
@@ -343,11 +324,9 @@ def next_pad(xi1: float, xi2: float, phi_a: float, lead: float) -> int:
 def gc_paused(fn):
     """Run ``fn`` with Python's cyclic garbage collector paused (it resumes on return).
 
-    A full collection can take 50-100 ms in a process that holds a long recording (measured
-    in the demo: one decision took 98 ms and missed its deadline).  The pause only moves it
-    to just after the call: a decision and its command are not delayed, but in a node the
-    samples that follow can be (the observer node is not paused).  Cyclic garbage is freed a
-    decision later (~2 ms).
+    A full collection in a process that holds a long recording can outlast a decision's
+    deadline; the pause moves it to just after the call, so no collection starts inside a
+    decision (``test_mpc.py::test_no_garbage_collection_runs_inside_a_decision``).
     """
     @functools.wraps(fn)
     def paused(*args, **kwargs):

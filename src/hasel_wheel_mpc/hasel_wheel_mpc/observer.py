@@ -1,20 +1,25 @@
 """State observer: the six hybrid states from telemetry, with speed seen through a 10-bit encoder.
 
 A 10-bit encoder sampled at 300 Hz resolves speed only in steps of 2 pi/1024 x 300 = 1.84 rad/s
-by finite difference (model-notes.md).  This observer is an extended Kalman filter on
-(xi1, xi2) whose prediction integrates the hybrid model itself (the same compiled RK4 flow as
-the plant), driven by the known actuation: q and eta from telemetry, phi_a of the latched
-command.  The measurement is the floor-quantised encoder angle, corrected to the middle of its
-count, with variance count^2/12 (+ noise^2).
+by finite difference (``docs/model.md``).  This observer is an extended Kalman filter on
+(xi1, xi2) and the coefficients of a_d, whose prediction integrates the hybrid model itself
+(the same compiled RK4 flow as the plant), driven by the known actuation: q and eta from
+telemetry, phi_a of the latched command.  The measurement is the floor-quantised encoder
+angle, corrected to the middle of its count, with variance count^2/12 (+ noise^2) [rad^2].
+Its speed error stays within 0.02 rad/s RMSE, a twentieth of the finite difference's
+(``test_observer.py::test_observer_beats_the_finite_difference_on_a_10_bit_encoder``).
 
 * Encoder glitches: an innovation beyond ``gate_sigma`` standard deviations is rejected and
-  counted; the prediction carries on.
-* Missing samples: the prediction spans the device-time gap.
-* Quality: 1 when the recent innovations are consistent, falling with the share of rejected
-  samples and with a stale link; 0 means unusable.
+  counted; the prediction carries on (``test_glitches_are_rejected_and_counted``).
+* Missing samples: the prediction spans the device-time gap
+  (``test_lost_samples_are_bridged_by_the_model``).
+* Lost wheel: after ``reacquire_after`` outliers in a row it restarts from their line fit
+  (``test_an_observer_started_on_a_fast_wheel_locks_on``).
+* Quality [1]: 1 - 5 x the share of rejected samples in the last ``window``, at least 0;
+  0 means unusable.
 
-``Observer.step(sample) -> Estimate`` is the whole contract.  The disturbance estimate stays 0
-here; the estimator that fills it is a separate core (issue: closing the speed loop).
+``Observer.step(sample) -> Estimate`` is the whole contract.  The MPC's speed offset d is
+not estimated here but in the control core (disturbance.py).  Details: ``docs/controller.md``.
 """
 from __future__ import annotations
 
@@ -39,15 +44,13 @@ from hasel_wheel_sim.wheel import initial_state
 class ObserverConfig:
     """Tuning (SI): unmodelled acceleration, extra encoder noise, gating, defaults.
 
-    The disturbance coefficients walk slowly (0.005 rad/s^2 per sqrt(s)): they then hold the
-    average of many pads rather than follow the last few, and the MPC's prediction, which
-    takes them as given, no longer scatters from cycle to cycle with the encoder's noise.
-    Their first values still come quickly (``initial_disturbance_std``).  At 0.05 (the
-    earlier default) the cycle means at 1.0 rad/s spread more, and the NRMSE there is higher
-    (``benchmarks/bench_speed_loop.py`` runs both).
+    The disturbance coefficients walk slowly, so they hold the average of many pads rather
+    than follow the last few, and the MPC's prediction, which takes them as given, does not
+    scatter from cycle to cycle with the encoder's noise.  Their first values still come
+    quickly (``initial_disturbance_std``).
     """
 
-    accel_noise: float = 0.05       # std of white unmodelled acceleration [rad/s^2] (swept: 0.02-0.1 best)
+    accel_noise: float = 0.05       # std of white unmodelled acceleration [rad/s^2]
     encoder_noise: float = 0.0      # encoder noise std beyond quantisation [rad]
     gate_sigma: float = 6.0         # innovations beyond this many sigma are outliers [1]
     default_phi_a: float = math.radians(3.0)   # phi_a when the latched command is unknown [rad]
@@ -84,8 +87,9 @@ class Estimate(NamedTuple):
 def estimate_from_msg(m: Any) -> Estimate:
     """An :class:`Estimate` from a HybridStateEstimate message (attribute access; float64
     fields, so exactly what the observer computed).  A message from before the five a_d
-    coefficients carries ``accel_disturbance`` as the constant part.  Test:
-    ``test_estimate_msg.py``."""
+    coefficients carries ``accel_disturbance`` as the constant part (``test_estimate_msg.py::
+    test_an_estimate_from_before_the_coefficients_reads_as_none_and_replays_alike``).
+    """
     coeffs = accel_coefficients_of(m) or (float(m.accel_disturbance), 0.0, 0.0, 0.0, 0.0)
     stamp = m.header.stamp
     return Estimate(stamp.sec + stamp.nanosec * 1e-9, float(m.xi1), float(m.xi2), int(m.q),
@@ -104,7 +108,9 @@ class Observer:
     is fixed to the room the wheel circles in: a sloping floor, a tether, the cable to the
     arm).  The lap is 1/(r/L) = 4.1 turns, 26 s at 1 rad/s: slower than a cycle, too fast for
     the constant part to follow without lag.  The coefficients are slow random walks.  a_d is
-    added to the model's acceleration in the prediction, and the MPC predicts with it too.
+    added to the model's acceleration in the prediction, and the MPC predicts with it too
+    (``test_observer.py::test_observer_recovers_a_known_off_centre_mass``,
+    ``test_observer_recovers_a_known_platform_disturbance``).
     """
 
     def __init__(self, params: WheelParams | None = None, extensions: Extensions | None = None,

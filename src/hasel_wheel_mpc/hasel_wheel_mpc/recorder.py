@@ -53,7 +53,9 @@ def launch_custom_data(files: Iterable[str], extra: Mapping[str, str] | None = N
     ``file:<name>``.  Jazzy's recorder cuts each pair at every '=' (keeping the first two
     pieces), so a file goes in as its text when that has no '='; else as its YAML data
     re-written without comments (the same parameters) when that has none; else as its path
-    and sha256.  An '=' in the keys or values of ``extra`` is refused."""
+    and sha256.  An '=' in the keys or values of ``extra`` is refused
+    (``test_recording.py::test_files_survive_jazzy_s_key_value_split``,
+    ``test_an_equals_sign_in_extra_data_is_refused``)."""
     out = {"git_revision": git_revision(), "packages": package_versions()}
     for key, value in (extra or {}).items():
         if "=" in key or "=" in value:

@@ -7,13 +7,18 @@ until the end of the run).  Per segment (:class:`SegmentMetrics`):
   steady window, the segment's last ``window`` seconds;
 * the transition time: rise time after a step up, fall time after a step down, from the step
   until the speed first reaches the new reference (NaN for the first segment);
-* the settling time: from the step until the speed first comes within 2 % of the reference.
+* the settling time: from the step until the speed first comes within 2 % of the reference
+  (``test_bag_metrics.py::test_segments_match_the_closed_forms``,
+  ``test_steady_windows_are_the_last_window_seconds_of_each_segment``).
 
 :class:`SegmentTracker` takes the samples and reference changes in time order and keeps only
 the last ``window`` seconds of samples, so a bag of any length is measured in the same
-memory.  A sample stamped at the very time of a reference change belongs to the new segment,
-whichever of the two arrives first.  NaN speeds and NaN references are left out.  Errors are
-relative to |ref| (a reference of 0, a stop, has none: NaN).
+memory (``test_the_tracker_keeps_only_the_steady_window_in_memory``).  A sample stamped at
+the very time of a reference change belongs to the new segment, whichever of the two arrives
+first (``test_a_sample_at_the_step_belongs_to_the_new_segment_in_either_order``).  NaN speeds
+and NaN references are left out.  Errors are relative to |ref| (a reference of 0, a stop, has
+none: NaN) (``test_nan_speeds_and_references_are_left_out_and_a_negative_reference_is_relative``,
+``test_a_stop_segment_has_no_relative_error_instead_of_a_crash``).
 """
 from __future__ import annotations
 

@@ -43,7 +43,7 @@ def test_observer_beats_the_finite_difference_on_a_10_bit_encoder():
     f = (np.mean(v[keep]) * TICK / COUNT) % 1.0
     expected_fd = COUNT / TICK * math.sqrt(f * (1 - f))
     assert rmse(fd[keep], v[keep]) == pytest.approx(expected_fd, rel=0.15)
-    assert rmse(est[keep], v[keep]) <= 0.02                            # issue target
+    assert rmse(est[keep], v[keep]) <= 0.02                            # target [rad/s]
     assert rmse(est[keep], v[keep]) < rmse(fd[keep], v[keep]) / 20
     assert obs.rejected == 0
 
