@@ -17,8 +17,8 @@ those an open-loop trial would hold, and the nominal force law can bend to take 
 These recordings have no coast-down either (the wheel is driven to the end), so friction is
 fitted with the force law.
 
-Run: ``.venv/bin/python benchmarks/bench_ident_closed_loop.py [--only SUBSTRING]`` (about
-12 minutes; the recordings about 25 s each).
+Run: ``.venv/bin/python benchmarks/bench_ident_closed_loop.py [--only SUBSTRING]`` (minutes;
+each line prints its own recording and identification times).
 """
 from __future__ import annotations
 

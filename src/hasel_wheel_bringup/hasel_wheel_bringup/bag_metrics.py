@@ -3,17 +3,20 @@
 
 For every namespace that has a reference topic (``<ns>/reference_speed``; when the bag's
 metadata shows it without messages, as in a ROS recording that subscribed after the reference
-was published, the ``reference_speed`` of the MPC's ``mpc_status`` records) the speed is taken
-from the simulator's true state (``<ns>/sim/true_state``, xi2) when the bag has it, else from
-the observer (``<ns>/state_estimate``, xi2) -- a recording from the real wheel has no true
-state, and its metrics then include the observer's error.  The reference messages make the
-profile: each starts a segment that lasts until the next (the last until the last speed
-sample).  Per segment, the definitions of :mod:`~hasel_wheel_mpc.segments`: steady-state
-error [%] and NRMSE over the segment's last ``window`` seconds, the rise or fall time after a
-step, and the settling time to 2 %.  From ``<ns>/mpc_status``: decisions, deadline misses and
-the smallest deadline slack [s] of the driving (not braking) decisions.  From ``<ns>/telemetry``: the link's lost samples (gaps in
-the device's sample counter), device restarts (the counter going back) and samples with
-fault flags.
+was published, the ``reference_speed`` of the MPC's ``mpc_status`` records;
+``test_bag_metrics.py::test_without_reference_messages_the_mpc_status_gives_the_reference``)
+the speed is taken from the simulator's true state (``<ns>/sim/true_state``, xi2) when the bag
+has it, else from the observer (``<ns>/state_estimate``, xi2) -- a recording from the real
+wheel has no true state, and its metrics then include the observer's error
+(``test_a_declared_but_empty_true_state_falls_back_to_the_observer``).  The reference
+messages make the profile: each starts a segment that lasts until the next (the last until
+the last speed sample).  Per segment, the definitions of :mod:`~hasel_wheel_mpc.segments`:
+steady-state error [%] and NRMSE over the segment's last ``window`` seconds, the rise or fall
+time after a step, and the settling time to 2 %.  From ``<ns>/mpc_status``: decisions,
+deadline misses and the smallest deadline slack [s] of the driving (not braking) decisions.
+From ``<ns>/telemetry``: the link's lost samples (gaps in the device's sample counter), device
+restarts (the counter going back) and samples with fault flags
+(``test_link_errors_come_from_the_telemetry_counter_and_flags``).
 
 Memory: per wheel the last ``window`` seconds of speed samples and one record per segment,
 whatever the bag's length.

@@ -118,7 +118,8 @@ def force_samples(t: np.ndarray, xi1: np.ndarray, xi2: np.ndarray, q: np.ndarray
     """(contact angle [rad], F_a [N]) at every sample with q = 1, from the flow map (38)
     inverted: F_a = (xi2' / inv_inertia + friction sign xi2) / (r sin xi_c).  All inputs
     (n,) on one time base; ``smooth``: differentiate with a Savitzky-Golay filter (noisy
-    speeds), else with central differences (a true speed)."""
+    speeds), else with central differences (a true speed)
+    (``test_bag_plot.py::test_the_force_recovered_from_the_true_motion_is_the_force_law``)."""
     pv = param_vector(params)
     if smooth and t.size > 7:
         dt = float(np.median(np.diff(t)))

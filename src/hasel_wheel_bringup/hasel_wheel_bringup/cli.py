@@ -33,8 +33,9 @@ from hasel_wheel_sim import paper
 from hasel_wheel_mpc.recorder import Recorder, git_revision
 from hasel_wheel_bringup.trials import TrialResult, run_trial, steady_speed, trials_from_mapping
 
-#: Cross-check numbers of model-notes.md (independent implementation): phi_a [deg] ->
-#: (exact w_ss [rad/s], exact t90 [s], tick w_ss [rad/s]).
+#: Cross-check figures of an independent implementation of the model (the "reference" columns
+#: of docs/benchmarks.md; hasel_wheel_sim's test_cross_check.py holds the model to them):
+#: phi_a [deg] -> (exact w_ss [rad/s], exact t90 [s], tick w_ss [rad/s]).
 NOTES_CROSS_CHECK = {1: (4.73, 26.6, 3.84), 5: (3.42, 22.5, 3.08), 9: (2.06, 16.1, 2.33),
                      11: (1.37, 9.8, 1.52)}
 
@@ -46,9 +47,9 @@ def _fmt(v: float | None, spec: str = "6.2f") -> str:
 def demo_table(exact: list[TrialResult], tick: list[TrialResult]) -> str:
     """The summary table of the demo as text."""
     lines = [
-        "Open-loop trials, phi_d = 22 deg, 60 s from 1 rad/s (model-notes set-up).",
+        "Open-loop trials, phi_d = 22 deg, 60 s from 1 rad/s (the cross-check's set-up).",
         "w_ss: mean speed over the last 10 s [rad/s]; t90: first time above 90 % of w_ss [s].",
-        "paper: Table II, measured (m/s / 0.157 m); notes: model-notes.md cross-check.",
+        "paper: Table II, measured (m/s / 0.157 m); notes: independent cross-check (docs/benchmarks.md).",
         "",
         "        | model, exact switching | model, 300 Hz ticks | paper Table II  | ratio exact/paper | notes (exact)  | notes",
         " phi_a  |   w_ss      t90        |   w_ss      t90     |  w_ss     t_r   |  w_ss      t      |  w_ss    t90   | tick w_ss",
@@ -171,11 +172,11 @@ def cmd_table2(args: argparse.Namespace) -> int:
                             first.phi_d, first.initial_speed, mode="tick", rule="after_active")
     t_brake = braking_fall_time(params)
     t_coast = braking_fall_time(params, brake=False)
-    print(f"Priming: {first.priming} activations (model-notes set-up); the paper's trials used 6.")
+    print(f"Priming: {first.priming} activations (the cross-check's set-up); the paper's trials used 6.")
     print("Ticks: switching on the first 300 Hz tick after the angle, next actuator counted from")
     print("the sector measured at switch-off (eq. (40)).  Counted from the actuator of interest")
     print(f"instead, phi_a = {math.degrees(first.phi_a):.0f} deg on ticks gives "
-          f"{steady_speed(np.arange(1, v_alt.size + 1) * TICK, v_alt):.2f} rad/s (README).")
+          f"{steady_speed(np.arange(1, v_alt.size + 1) * TICK, v_alt):.2f} rad/s (docs/benchmarks.md).")
     print(f"Braking 2.6 -> 2.0 rad/s (n_a = eta + 2, -22/-6 deg, brake_gain {params.brake_gain:g}): "
           f"{t_brake:.2f} s; friction alone {t_coast:.2f} s; paper Fig. 11(c) ~1.2 s.")
     print(f"Bag: {bag_dir} ({rec.bag.metadata()['rosbag2_bagfile_information']['message_count']}"
@@ -214,9 +215,9 @@ def cmd_link_run(args: argparse.Namespace) -> int:
             rec.command("/wheel0", cmd, s.t)
 
     cfg = P.Config(watchdog_ms=int(min(1000, 100 * max(1.0, args.time_scale))))
-    # bound before it starts: its reader thread may hand over the first sample at once (a
-    # sample that came before the name was bound lost the sequencer's first command, and the
-    # wheel coasted; seen in a clean-clone run on two busy cores)
+    # bound before it starts: its reader thread may hand over the first sample at once, and
+    # on_sample needs ``core`` to send the sequencer's first command
+    # (test_demo.py::test_link_run_drives_the_wheel_over_a_pty_and_records)
     core = DriverCore(LinkConfig(str(link), enable_hv_on_connect=True, device_config=cfg),
                       on_sample=on_sample,
                       on_event=lambda e: print(f"  link: {e}", file=sys.stderr))

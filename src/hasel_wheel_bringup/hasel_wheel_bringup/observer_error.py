@@ -5,7 +5,9 @@ stamp (the observer stamps an estimate with its telemetry sample's stamp, and th
 stamps its true state on the same clock), from the estimates' bag or from another one: a
 replay's bag (``replay.launch.py``) holds new estimates for the recorded samples, and the
 original run's bag holds the truth.  The first ``skip`` seconds after the first paired
-estimate (the observer acquiring the wheel) are left out.
+estimate (the observer acquiring the wheel) are left out
+(``test_observer_error.py::test_alternating_offset_has_its_rms_and_the_start_is_left_out``,
+``test_a_replay_s_estimates_pair_with_the_original_run_s_truth``).
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 
 For every wheel (namespace) of the bag that has ``telemetry`` and ``reference_speed``,
 :func:`replay_bag` builds the controller from the configuration recorded in the bag
-(``<ns>/controller.yaml``, see :class:`~hasel_wheel_mpc.controller.ControllerConfig`),
+(``<ns>/controller.yaml``, see :class:`~hasel_wheel_mpc.config.ControllerConfig`),
 optionally changed by overrides, feeds it every recorded telemetry sample with the reference
 in force at that sample, and compares what it computes with what the bag recorded:
 
@@ -11,9 +11,12 @@ in force at that sample, and compares what it computes with what the bag recorde
 
 The one thing a replay cannot re-compute is how long the MPC took on the recording machine;
 the replay's MPC clock plays the recorded compute times back (:class:`PlaybackClock`), so the
-deadline logic (slack, fallback on a miss) decides as it did.  With the recorded
-configuration and no overrides, everything matches exactly (bit for bit); with changes, the
-report counts the differing fields, their largest difference and the first time one differs.
+deadline logic (slack, fallback on a miss) decides as it did
+(``test_replay.py::test_playback_clock_replays_compute_times``,
+``test_a_played_back_late_decision_takes_the_fallback``).  With the recorded configuration and
+no overrides, everything matches exactly (bit for bit; ``test_unchanged_replay_is_identical``);
+with changes, the report counts the differing fields, their largest difference and the first
+time one differs (``test_a_changed_brake_threshold_differs_from_a_decision_on``).
 """
 from __future__ import annotations
 
@@ -131,7 +134,7 @@ def _compare(recorded: Any, recomputed: Mapping[str, Any], t: float,
              diffs: dict[str, FieldDiff]) -> None:
     a, b = _flat(recorded), _flat(recomputed)
     # a field only one side has is a newer message definition than the bag's, not a
-    # difference in what was computed (e.g. accel_c..accel_f, added after the first bags)
+    # difference in what was computed (e.g. accel_c..accel_f, which older bags lack)
     for name in sorted(set(a) & set(b)):
         x, y = a.get(name), b.get(name)
         if isinstance(x, float) and isinstance(y, float) and math.isnan(x) and math.isnan(y):

@@ -13,7 +13,11 @@ from hasel_wheel_sim.model import SECTOR
 
 
 class Sequencer:
-    """u = ((eta + 1) mod 16, phi_a, phi_d) at every switch-on; restarts an idle wheel."""
+    """u = ((eta + 1) mod 16, phi_a, phi_d) at every switch-on; restarts an idle wheel after
+    ``restart_after`` samples without HV, from the sector the encoder measures
+    (``test_sequencer.py::test_commands_next_pad_at_switch_on_only``,
+    ``test_no_commands_while_hv_is_off_and_restart_when_idle``,
+    ``test_restart_counts_from_the_measured_sector_not_a_stale_target``)."""
 
     def __init__(self, phi_a: float, phi_d: float, restart_after: int = 150) -> None:
         self.phi_a = phi_a

@@ -7,7 +7,10 @@ at the step's angles; the first ``priming`` commands of the run use ``priming_ph
 (the paper primes with six activations at 3 deg).  For every step it measures the steady
 speed from the encoder: the slope of the unwrapped angle over the step's last
 ``steady_window`` seconds.  After the last step it sends nothing more, so the wheel finishes
-its current cycle and coasts.
+its current cycle and coasts (``test_trial_schedule.py::
+test_steps_run_back_to_back_from_the_first_sample_with_hv_on``,
+``test_priming_commands_use_the_priming_angle_then_the_step_angle``,
+``test_steady_speed_is_the_true_mean_speed_over_the_window``).
 
 ``step(sample) -> Command | None`` is the whole contract, as for the Sequencer.
 """

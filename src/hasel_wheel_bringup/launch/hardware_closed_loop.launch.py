@@ -9,11 +9,10 @@
 
 The observer and the MPC start first; the driver (hasel_wheel_driver's driver.launch.py)
 starts once both have logged "ready:" (per wheel, with ports:=...), so the first telemetry
-finds them loaded.  The driver
-keeps high voltage off until ``hv_enabled`` is set true, and switches it off again when the
-link goes quiet, a command is rejected or the launch stops.  Every topic is recorded to an
-MCAP bag (record.launch.py) with the driver's, observer's and MPC's parameter files in the
-bag's custom data; record:=false turns recording off.
+finds them loaded.  The driver keeps high voltage off until ``hv_enabled`` is set true, and
+switches it off again when the link goes quiet, a command is rejected or the launch stops.
+Every topic is recorded to an MCAP bag (record.launch.py) with the driver's, observer's and
+MPC's parameter files in the bag's custom data; record:=false turns recording off.
 """
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction

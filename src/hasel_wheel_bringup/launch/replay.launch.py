@@ -5,14 +5,15 @@
 
 ``<namespace>/telemetry``, ``reference_speed``, ``command`` and ``mpc_status`` are played: the
 observer must know the angles of the commands the wheel really ran (the telemetry names them
-by sequence number) and the predictions its disturbance estimator compares with.  The
+by sequence number), and the recorded decisions land in the new bag beside the replay's.  The
 observer computes a new ``state_estimate``; the MPC's new commands and decisions go to
 ``<namespace>/replay/command`` and ``<namespace>/replay/mpc_status`` (remapped, so they neither
 reach the observer nor mix with the recorded ones: the replay MPC numbers its commands from 0
-as the recorded one did, and its angles would overwrite the recorded ones).  Everything is recorded to a new bag (record.launch.py;
-record:=false turns it off).  Nothing drives a wheel: no driver or simulator runs, and the
-recorded motion is the one the original controller caused (an open-loop replay).  Playback starts once both
-nodes have logged "ready:"; the launch ends when the bag has been played.
+as the recorded one did, and its angles would overwrite the recorded ones).  Everything is
+recorded to a new bag (record.launch.py; record:=false turns it off).  Nothing drives a
+wheel: no driver or simulator runs, and the recorded motion is the one the original
+controller caused (an open-loop replay).  Playback starts once both nodes have logged
+"ready:"; the launch ends when the bag has been played.
 
 The nodes see the samples in real time, with the MPC's wall-clock deadline, so their output
 is close to but not bit-identical with the recording; the exact re-computation is offline:

@@ -10,10 +10,10 @@
 The observer and the MPC start first; the simulator (hasel_wheel_sim's sim.launch.py, on the
 plant with realistic effects unless plant_file:=... says otherwise) starts once both have
 logged "ready:", and holds its wheel at t = 0 until its controller is connected (the MPC
-node, which publishes command and subscribes to telemetry).  The simulated wheel starts at 1 rad/s and
-coasts to a stop within about 2 s without commands, and a stopped wheel cannot be started;
-loading (or on the first run, compiling) the model takes the nodes longer than that on a
-small machine.
+node, which publishes command and subscribes to telemetry).  The simulated wheel starts at
+1 rad/s and coasts to a stop within seconds without commands, and a stopped wheel cannot be
+started; loading (or on the first run, compiling) the model can take the nodes longer than
+that.
 
 Every topic is recorded to an MCAP bag (record.launch.py) with the parameter files, the plant
 file (its seed) and the controller's model file in the bag's custom data.

@@ -38,7 +38,7 @@ def test_demo_prints_the_table_beside_table_ii(demo):
     paper_ss = float(one[3].split()[0])
     assert paper_ss == pytest.approx(paper.TABLE_II_PHI_D22[1][1] / 0.157, abs=0.01)
     assert float(one[4].split()[0]) == pytest.approx(exact_ss / paper_ss, abs=0.01)
-    assert exact_ss == pytest.approx(4.73, rel=0.02)          # model-notes cross-check
+    assert exact_ss == pytest.approx(4.73, rel=0.02)          # cli.NOTES_CROSS_CHECK
 
 
 def test_demo_bag_decodes_completely_with_rosbags(demo):

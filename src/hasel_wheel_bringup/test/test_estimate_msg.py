@@ -63,7 +63,7 @@ def test_the_coefficients_arrive_exactly_and_the_node_decides_as_the_embedded_lo
     assert not embedded.braking and embedded.candidates >= 15
     assert node.command[:3] == embedded.command[:3]
     assert node.predicted_speed == embedded.predicted_speed
-    # what the node did before: a_d held at its present value over the whole prediction
+    # a_d held at its present value over the whole prediction predicts differently
     held = decide_at(Mpc(), *args, (e.accel_disturbance, 0.0, 0.0), e.act_counter)
     assert held.predicted_speed != embedded.predicted_speed
 

@@ -100,9 +100,9 @@ def test_a_glitch_inside_an_activation_neither_splits_it_nor_moves_its_pad_a_tur
 def test_a_glitch_half_a_turn_off_does_not_shift_the_rest_of_the_trial_a_turn(trial, form):
     # a reading just under half a turn below the one before: the step down is shorter than
     # pi, the step back up (the same plus the wheel's motion) longer, so np.unwrap takes it
-    # as a wrap and everything after is a turn low (seen on simulated data with 0.1 %
-    # glitches: a free run 2.7 rad/s off).  A device that unwraps its counts itself can make
-    # the same slip: then the recording is a turn low from the sample after the glitch on.
+    # as a wrap and everything after is a turn low.  A device that unwraps its counts itself
+    # can make the same slip: then the recording is a turn low from the sample after the
+    # glitch on.
     truth = trial.angle
     k = next(i for i in range(3000, 4000) if truth[i + 1] - truth[i - 1] > 0.005)
     count = 2 * math.pi / 1024
@@ -147,9 +147,9 @@ def test_the_measured_speed_bridges_isolated_encoder_glitches(trial):
 
 @pytest.mark.parametrize("where", [0, -1])
 def test_a_glitch_at_either_end_is_rejected_as_one_inside_is(trial, where):
-    # the first and the last reading have one neighbour each; a random count there had been
-    # kept, and the first one put a speed spike of -36 rad/s and a wrong start into a
-    # trial's free run (benchmarks/sweep_ident.py, README)
+    # the first and the last reading have one neighbour each; a random count there must be
+    # rejected as one inside is, or it puts a speed spike and a wrong start into the trial's
+    # free run
     from hasel_wheel_ident.metrics import measured_speed
     assert D.clean_mask(trial.t, trial.angle).all()
     cols = _columns(trial)
@@ -237,7 +237,7 @@ def test_bag_from_the_embedded_runner_gives_the_same_activations(tmp_path):
 
 @pytest.mark.parametrize("config, warned", [
     ({"wheels": "3", "same_wheel": "false"}, True),
-    ({"wheels": "3"}, True),                  # a bag from before --same-wheel: separate wheels
+    ({"wheels": "3"}, True),                  # no same_wheel record: separate wheels
     ({"wheels": "3", "same_wheel": "true"}, False),
     ({"wheels": "1", "same_wheel": "false"}, False),
     ({}, False),                              # not the demo's bag
@@ -255,7 +255,7 @@ def test_a_bag_of_separate_wheels_is_told_apart_from_runs_of_one(tmp_path, confi
 def test_a_closed_loop_bag_gives_the_start_command_to_the_pads_it_drives(tmp_path):
     # the runner starts the wheel with its own command (sequence 0) before the MPC decides;
     # with viscous drag (seed 3) the first switch-on falls on the sample where the MPC's first
-    # command goes out, and a bag without the start command left that pad without angles
+    # command goes out, and that pad takes its angles from the recorded start command
     rec = Recorder(tmp_path / "bag")
     drag = {"viscous_drag": {"enabled": True,
                              "coefficient": {"value": 1e-3, "unit": "N*m*s/rad"}}}
@@ -328,7 +328,7 @@ def test_a_coast_down_ends_where_the_wheel_rests_though_its_count_flickers():
     # a wheel stopped between two encoder counts reads one or the other: the count changes
     # long after the wheel stopped.  The coast-down must end where the rest begins, as the
     # fit's trimming does, or the parabola takes in seconds of rest and reads a fraction of
-    # the deceleration (tau_f 0.0046 against 0.0104 N*m on such a trial before)
+    # the deceleration
     cfg = PlantConfig(seed=2, switching="tick", effects=effects_from_mapping(ENCODER))
     trial = S.record(S.SyntheticTrial(math.radians(3.0), drive=6.0, coast=14.0), config=cfg)
     (a, b), = trial.coasts
@@ -346,8 +346,8 @@ def test_a_coast_down_ends_where_the_wheel_rests_though_its_count_flickers():
     base = WheelParams()
     est = F.coastdown_friction([flicker], base)
     assert est.tau_f == pytest.approx(base.tau_f, rel=0.02)
-    # the premise, on these data (no code of ours in it): ending at the last count change,
-    # as the coast-downs did, reads far too little friction
+    # the premise, on these data (no code of ours in it): ending at the last count change
+    # reads far too little friction
     last = int(np.flatnonzero(np.diff(cols["angle"][a:]))[-1]) + a + 1
     t, y = flicker.t[a:last] - flicker.t[a], flicker.angle[a:last]
     curv = np.polyfit(t, y, 2)[0]

@@ -1,8 +1,8 @@
 """Offline replay: a recorded closed loop re-computed from its bag.
 
-Unchanged, every estimate and decision must come back bit for bit (the acceptance point of
-the bag issue); changed, the report must show differences, and none before the first
-decision the change can affect (causality: the replay is open loop on recorded telemetry).
+Unchanged, every estimate and decision must come back bit for bit; changed, the report must
+show differences, and none before the first decision the change can affect (causality: the
+replay is open loop on recorded telemetry).
 """
 import dataclasses
 import math
@@ -80,8 +80,7 @@ def test_a_changed_brake_threshold_differs_from_a_decision_on(recorded):
     t1 = rep.first_difference
     assert round(t1, 6) in decided_at                      # the first change is a decision
     assert all(d.first_t > t1 for d in rep.estimate_diffs.values())   # estimates follow it
-    # the higher threshold first shows as a decision that drives where the run braked (the
-    # step down to 1.2 rad/s brakes down to 1.4 rad/s with the default 0.2, to 1.8 with 0.6)
+    # the higher threshold first shows as a decision that drives where the run braked
     assert rep.decision_diffs["braking"].first_t == t1
     assert rep.decision_diffs["command.mode"].first_t == t1
     assert "DIFFERENT from t =" in rep.text() and "decision.braking" in rep.text()

@@ -58,7 +58,7 @@ ROSDEP = {"numpy": "python3-numpy", "scipy": "python3-scipy", "yaml": "python3-y
           "serial": "python3-serial", "matplotlib": "python3-matplotlib", "tqdm": "python3-tqdm",
           "numba": "python3-numba", "pytest": "python3-pytest",
           "hypothesis": "python3-hypothesis", "launch_testing": "launch_testing"}
-#: Imported, but with no rosdep key: pip-installed as the README says.
+#: Imported, but with no rosdep key: pip-installed as docs/ros2.md says.
 NO_ROSDEP_KEY = {"mcap", "mcap_ros2", "cobs", "rosbags"}
 #: Imported only inside a try (the code runs without them): not dependencies.
 OPTIONAL = {"pyarrow", "threadpoolctl", "zstandard"}
