@@ -15,7 +15,7 @@ import warnings
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.layout import BagError, BagErrorCode
 
 from hasel_wheel_bag.reader import read_messages
 
@@ -76,7 +76,8 @@ class _ParquetSink:
         except ImportError as exc:
             raise BagError(f"Parquet export needs pyarrow, which cannot be imported ({exc}); "
                            f"install it (pip install 'pyarrow>=15'; with NumPy 1.x, as on "
-                           f"Ubuntu 24.04: 'pyarrow>=15,<26') or export CSV") from exc
+                           f"Ubuntu 24.04: 'pyarrow>=15,<26') or export CSV",
+                           BagErrorCode.EXPORT_NEEDS_PYARROW) from exc
         self._pa, self._pq = pa, pq
         self._file, self._columns = file, columns
         self._rows: list[list[Any]] = []
@@ -118,7 +119,8 @@ def export(path: str | os.PathLike, out_dir: str | os.PathLike,
     misfits counts messages whose arrays had another length than the first's (their
     missing cells are empty).  ``progress``: a progress bar on stderr (on a terminal)."""
     if fmt not in FORMATS:
-        raise BagError(f"export format {fmt!r}: expected one of {sorted(FORMATS)}")
+        raise BagError(f"export format {fmt!r}: expected one of {sorted(FORMATS)}",
+                       BagErrorCode.EXPORT_FORMAT)
     sink_cls = FORMATS[fmt]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import struct
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -29,8 +30,59 @@ CONFIG_RECORD = "hasel_wheel/configuration"
 MCAP_DATA_ERRORS = (McapError, ValueError, struct.error, ZstdError)
 
 
+class BagErrorCode(str, Enum):
+    """Why a bag cannot be written or read (:attr:`BagError.code`)."""
+
+    OTHER = "other"
+    EXISTS = "exists"                          # the output directory is not empty
+    NO_SUCH_BAG = "no_such_bag"                # neither a directory nor a file
+    NO_FILES = "no_files"                      # a directory without metadata.yaml or .mcap
+    METADATA_NOT_YAML = "metadata_not_yaml"
+    METADATA_NOT_ROSBAG2 = "metadata_not_rosbag2"
+    METADATA_NO_FILE_LIST = "metadata_no_file_list"
+    FILE_MISSING = "file_missing"              # listed in metadata.yaml, not on disk
+    FILE_EMPTY = "file_empty"
+    NOT_MCAP = "not_mcap"
+    CORRUPT = "corrupt"                        # a finished file with damaged data
+    TOPIC_DECLARED = "topic_declared"          # add_topic twice
+    TOPIC_UNDECLARED = "topic_undeclared"      # write before add_topic
+    CUSTOM_DATA_NOT_TEXT = "custom_data_not_text"
+    EXPORT_FORMAT = "export_format"
+    EXPORT_NEEDS_PYARROW = "export_needs_pyarrow"
+
+
 class BagError(RuntimeError):
-    """A bag cannot be written or read; the message says which file and why."""
+    """A bag cannot be written or read; the message says which file and why for a reader,
+    :attr:`code` (a :class:`BagErrorCode`) says why for a program."""
+
+    def __init__(self, message: str, code: BagErrorCode = BagErrorCode.OTHER) -> None:
+        super().__init__(message)
+        self.code = code
+
+
+class BagNote(str):
+    """A warning a reader passes to its ``warn`` callback: the text for a reader, with
+    :attr:`kind` (one of the ``NOTE_*`` names) and :attr:`facts` (numbers, names) for a
+    program.  It is a ``str``, so ``print`` and ``warnings.warn`` take it as it is."""
+
+    kind: str
+    facts: dict[str, Any]
+
+    def __new__(cls, text: str, kind: str, **facts: Any) -> "BagNote":
+        note = super().__new__(cls, text)
+        note.kind = kind
+        note.facts = facts
+        return note
+
+
+#: A killed recording whose chunks are all whole (facts: messages).
+NOTE_UNFINISHED = "unfinished"
+#: A killed recording cut inside a record (facts: messages, cut_at, size [bytes]).
+NOTE_CUT = "cut"
+#: A killed recording with a chunk whose checksum is wrong (facts: messages).
+NOTE_BAD_CHECKSUM = "bad_checksum"
+#: A channel skipped because its messages cannot be decoded (facts: topic).
+NOTE_UNDECODABLE = "undecodable"
 
 
 def bag_metadata(path: str | os.PathLike) -> dict[str, Any] | None:
@@ -44,12 +96,13 @@ def bag_metadata(path: str | os.PathLike) -> dict[str, Any] | None:
         data = yaml.safe_load(meta.read_text(encoding="utf-8"))
     except (yaml.YAMLError, UnicodeDecodeError) as exc:
         raise BagError(f"{meta}: not readable YAML ({exc}); delete it and run `ros2 bag "
-                       f"reindex` or read the .mcap file directly") from exc
+                       f"reindex` or read the .mcap file directly",
+                       BagErrorCode.METADATA_NOT_YAML) from exc
     info = data.get("rosbag2_bagfile_information") if isinstance(data, dict) else None
     if not isinstance(info, dict):
         raise BagError(f"{meta}: no 'rosbag2_bagfile_information' mapping, so not rosbag2 "
                        f"metadata; delete it and run `ros2 bag reindex` or read the .mcap file "
-                       f"directly")
+                       f"directly", BagErrorCode.METADATA_NOT_ROSBAG2)
     return info
 
 
@@ -59,17 +112,20 @@ def mcap_files(path: str | os.PathLike) -> list[Path]:
     if p.is_file():
         return [p]
     if not p.is_dir():
-        raise BagError(f"{p}: no such bag (expected a rosbag2 directory or a .mcap file)")
+        raise BagError(f"{p}: no such bag (expected a rosbag2 directory or a .mcap file)",
+                       BagErrorCode.NO_SUCH_BAG)
     info = bag_metadata(p)
     if info is not None:
         names = info.get("relative_file_paths")
         if not isinstance(names, list) or not names:
             raise BagError(f"{p / 'metadata.yaml'}: no relative_file_paths list; delete it and "
-                           f"run `ros2 bag reindex` or read the .mcap file directly")
+                           f"run `ros2 bag reindex` or read the .mcap file directly",
+                           BagErrorCode.METADATA_NO_FILE_LIST)
         return [p / str(f) for f in names]
     files = sorted(p.glob("*.mcap"))
     if not files:
-        raise BagError(f"{p}: directory holds neither metadata.yaml nor any .mcap file")
+        raise BagError(f"{p}: directory holds neither metadata.yaml nor any .mcap file",
+                       BagErrorCode.NO_FILES)
     return files
 
 

@@ -16,7 +16,8 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
 from hasel_wheel_bag.cdr_flat import CDR_LE, flat_decoder
-from hasel_wheel_bag.layout import (CONFIG_RECORD, MCAP0_MAGIC, MCAP_DATA_ERRORS, BagError,
+from hasel_wheel_bag.layout import (CONFIG_RECORD, MCAP0_MAGIC, MCAP_DATA_ERRORS,
+                                    NOTE_UNDECODABLE, BagError, BagErrorCode, BagNote,
                                     bag_metadata, has_summary, mcap_files)
 from hasel_wheel_bag.recovery import recovered_metadata, recovered_records
 
@@ -31,8 +32,8 @@ def read_messages(path: str | os.PathLike, topics: list[str] | None = None,
     off at the end) is read record by record, in the order it was written, up to the last
     complete chunk, and ``warn`` (e.g. ``print``; default :func:`warnings.warn`) is told what
     was lost.  A channel whose messages cannot be decoded (a type without a ros2msg schema)
-    is skipped with one warning.  A file that is not MCAP at all raises :class:`BagError`
-    naming it.  ``select(topic)``, when given, picks topics by name before anything is
+    is skipped with one warning.  Warnings are :class:`~.layout.BagNote` texts.  A file that
+    is not MCAP at all raises :class:`BagError` naming it.  ``select(topic)``, when given, picks topics by name before anything is
     decoded (e.g. by suffix, when the namespaces are not known in advance).  ``progress``,
     when given, labels a progress bar on stderr (shown only on a terminal)."""
     say = warn or (lambda text: warnings.warn(text, stacklevel=3))
@@ -93,13 +94,16 @@ def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str
     generator is (garbage-)collected or closed."""
     for f in mcap_files(path):
         if not f.is_file():
-            raise BagError(f"{f}: listed in the bag's metadata.yaml but missing")
+            raise BagError(f"{f}: listed in the bag's metadata.yaml but missing",
+                           BagErrorCode.FILE_MISSING)
         if f.stat().st_size == 0:
-            raise BagError(f"{f}: empty file (the recorder stopped before writing anything)")
+            raise BagError(f"{f}: empty file (the recorder stopped before writing anything)",
+                           BagErrorCode.FILE_EMPTY)
         with open(f, "rb") as fh:
             if fh.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
                 raise BagError(f"{f}: not an MCAP file (it does not start with the MCAP magic "
-                               f"bytes); a rosbag2 bag here must use the mcap storage")
+                               f"bytes); a rosbag2 bag here must use the mcap storage",
+                               BagErrorCode.NOT_MCAP)
             fh.seek(0)
             finished = has_summary(fh)
             fh.seek(0)
@@ -141,7 +145,8 @@ def _named_errors(records: Iterator[Any], f: Path) -> Iterator[Any]:
         yield from records
     except (*MCAP_DATA_ERRORS, RuntimeError) as exc:
         raise BagError(f"{f}: corrupt MCAP data ({type(exc).__name__}: {exc}); the file was "
-                       f"closed properly, so this is damage, not a killed recording") from exc
+                       f"closed properly, so this is damage, not a killed recording",
+                       BagErrorCode.CORRUPT) from exc
 
 
 def _decoded(messages: Iterator[tuple[Any, Any, Any]], f: Path,
@@ -164,11 +169,13 @@ def _decoder_for(factory: DecoderFactory, schema: Any, channel: Any, f: Path,
     try:
         generic = factory.decoder_for(channel.message_encoding, schema)
     except Exception as exc:             # a schema the ros2msg parser rejects
-        say(f"{f}: topic {channel.topic}: its schema cannot be read ({exc}); skipped")
+        say(BagNote(f"{f}: topic {channel.topic}: its schema cannot be read ({exc}); skipped",
+                    NOTE_UNDECODABLE, topic=channel.topic))
         return None
     if generic is None:
-        say(f"{f}: topic {channel.topic} ({channel.message_encoding}, schema "
-            f"{schema.name if schema else 'none'}) has no ROS 2 decoder; skipped")
+        say(BagNote(f"{f}: topic {channel.topic} ({channel.message_encoding}, schema "
+                    f"{schema.name if schema else 'none'}) has no ROS 2 decoder; skipped",
+                    NOTE_UNDECODABLE, topic=channel.topic))
         return None
     if channel.message_encoding != "cdr" or schema is None or schema.encoding != "ros2msg":
         return generic

@@ -16,14 +16,15 @@ from mcap.reader import NonSeekingReader
 from mcap.records import Metadata
 from mcap.stream_reader import CRCValidationError, StreamReader
 
-from hasel_wheel_bag.layout import MCAP0_MAGIC, MCAP_DATA_ERRORS
+from hasel_wheel_bag.layout import (MCAP0_MAGIC, MCAP_DATA_ERRORS, NOTE_BAD_CHECKSUM, NOTE_CUT,
+                                    NOTE_UNFINISHED, BagNote)
 
 
 def recovered_records(fh: Any, f: Path, topics: list[str] | None,
                       say: Callable[[str], None]) -> Iterator[tuple[Any, Any, Any]]:
     """(schema, channel, message) records of the unfinished file ``fh`` (named ``f``), in
     file order, only of ``topics`` when given, up to where it breaks off; then one
-    ``say(text)`` naming what was lost."""
+    ``say(note)`` (a :class:`~.layout.BagNote`) naming what was lost."""
     reader = NonSeekingReader(fh, validate_crcs=True)
     count, last = 0, None
     try:
@@ -32,21 +33,24 @@ def recovered_records(fh: Any, f: Path, topics: list[str] | None,
             last = record[2].log_time
             yield record
     except CRCValidationError as exc:
-        say(f"{f}: the recording was not closed (killed?), and a chunk's checksum is wrong "
-            f"({exc}); read {count} messages{_until(last)}; reading stops at the damaged "
-            f"chunk, and every chunk after it is lost too")
+        say(BagNote(f"{f}: the recording was not closed (killed?), and a chunk's checksum is "
+                    f"wrong ({exc}); read {count} messages{_until(last)}; reading stops at the "
+                    f"damaged chunk, and every chunk after it is lost too",
+                    NOTE_BAD_CHECKSUM, messages=count))
     except MCAP_DATA_ERRORS as exc:
         size, at = f.stat().st_size, whole_records_end(fh)
         where = (f"ends after its last finished chunk at byte {size}" if at >= size else
                  f"is cut inside a record that starts at byte {at} of {size} "
                  f"({type(exc).__name__})")
-        say(f"{f}: the recording was not closed (killed?) and {where}; read {count} messages"
-            f"{_until(last)}; lost: what the recorder still held in memory (at most one "
-            f"chunk){'' if at >= size else ' and the record that was cut'}")
+        text = (f"{f}: the recording was not closed (killed?) and {where}; read {count} "
+                f"messages{_until(last)}; lost: what the recorder still held in memory (at most "
+                f"one chunk){'' if at >= size else ' and the record that was cut'}")
+        say(BagNote(text, NOTE_UNFINISHED, messages=count) if at >= size else
+            BagNote(text, NOTE_CUT, messages=count, cut_at=at, size=size))
     else:
-        say(f"{f}: the recording was not closed (killed?): no summary, but every chunk is "
-            f"whole; read {count} messages{_until(last)}; lost: what the recorder still held "
-            f"in memory (at most one chunk)")
+        say(BagNote(f"{f}: the recording was not closed (killed?): no summary, but every chunk "
+                    f"is whole; read {count} messages{_until(last)}; lost: what the recorder "
+                    f"still held in memory (at most one chunk)", NOTE_UNFINISHED, messages=count))
 
 
 def recovered_metadata(fh: Any) -> Iterator[Metadata]:

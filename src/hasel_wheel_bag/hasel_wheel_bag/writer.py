@@ -19,7 +19,8 @@ from mcap.writer import Writer as McapWriter
 
 from hasel_wheel_bag import interfaces
 from hasel_wheel_bag.cdr_encode import encoder_for
-from hasel_wheel_bag.layout import CONFIG_RECORD, METADATA_VERSION, ROS_DISTRO, BagError
+from hasel_wheel_bag.layout import (CONFIG_RECORD, METADATA_VERSION, ROS_DISTRO, BagError,
+                                    BagErrorCode)
 from hasel_wheel_common.topics import QosSpec
 
 #: The MCAP header's library field of the bags we write.
@@ -76,7 +77,7 @@ class BagWriter:
         self.path = Path(path)
         if self.path.exists() and any(self.path.iterdir()):
             raise BagError(f"{self.path}: bag directory exists and is not empty; choose a new "
-                           f"output directory or remove the old bag")
+                           f"output directory or remove the old bag", BagErrorCode.EXISTS)
         self.path.mkdir(parents=True, exist_ok=True)
         self.file_name = f"{self.path.name}_0.mcap"
         self._fh = open(self.path / self.file_name, "wb")
@@ -97,7 +98,8 @@ class BagWriter:
         keeps it."""
         bad = {k: type(v).__name__ for k, v in data.items() if not isinstance(v, str)}
         if bad:
-            raise BagError(f"custom data must be strings (YAML text for structures); got {bad}")
+            raise BagError(f"custom data must be strings (YAML text for structures); got {bad}",
+                           BagErrorCode.CUSTOM_DATA_NOT_TEXT)
         if data:
             self.custom_data.update(data)
             self._mcap.add_metadata(CONFIG_RECORD, dict(data))
@@ -105,7 +107,7 @@ class BagWriter:
     def add_topic(self, topic: str, datatype: str, qos: QosSpec) -> None:
         """Declare a topic before writing to it (its schema is embedded once per type)."""
         if topic in self._channels:
-            raise BagError(f"topic {topic!r} is already declared")
+            raise BagError(f"topic {topic!r} is already declared", BagErrorCode.TOPIC_DECLARED)
         text = interfaces.full_definition(datatype)
         if datatype not in self._schemas:
             self._schemas[datatype] = self._mcap.register_schema(datatype, "ros2msg", text.encode())
@@ -118,7 +120,8 @@ class BagWriter:
         """Encode ``message`` (a dict shaped like the ROS message) and write it at ``t_ns``."""
         ch = self._channels.get(topic)
         if ch is None:
-            raise BagError(f"topic {topic!r} was not declared with add_topic()")
+            raise BagError(f"topic {topic!r} was not declared with add_topic()",
+                           BagErrorCode.TOPIC_UNDECLARED)
         data = ch.encoder(message)
         self._mcap.add_message(ch.channel_id, log_time=t_ns, data=data, publish_time=t_ns,
                                sequence=ch.count)

@@ -8,7 +8,7 @@ from rosbags.highlevel import AnyReader
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
-from hasel_wheel_bag.layout import BagError
+from hasel_wheel_bag.layout import BagError, BagErrorCode
 from hasel_wheel_bag.reader import read_messages
 from hasel_wheel_bag.writer import BagWriter
 
@@ -80,10 +80,13 @@ def test_metadata_is_rosbag2_v9(bag):
 
 
 def test_refuses_to_overwrite_and_names_missing_bags(tmp_path, bag):
-    with pytest.raises(BagError, match="exists and is not empty"):
+    with pytest.raises(BagError, match=str(bag)) as err:
         BagWriter(bag)
-    with pytest.raises(BagError, match="no such bag"):
+    assert err.value.code == BagErrorCode.EXISTS
+    with pytest.raises(BagError, match="nope") as err:
         list(read_messages(tmp_path / "nope"))
+    assert err.value.code == BagErrorCode.NO_SUCH_BAG
     with BagWriter(tmp_path / "b2") as b:
-        with pytest.raises(BagError, match="was not declared"):
+        with pytest.raises(BagError, match="/x") as err:
             b.write("/x", {}, 0)
+        assert err.value.code == BagErrorCode.TOPIC_UNDECLARED

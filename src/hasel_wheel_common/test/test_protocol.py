@@ -50,7 +50,7 @@ def test_layout_sizes_are_the_specs():
 
 
 def test_values_that_do_not_fit_are_a_clear_error():
-    with pytest.raises(P.ProtocolError, match=r"Command .* a value does not fit its field"):
+    with pytest.raises(P.ProtocolError, match="Command"):
         P.encode(P.Command(-1, 3, 0.1, 0.2), 0)
 
 

@@ -44,6 +44,7 @@ class SimRuntime:
         self.samples_lost = 0
         self.overruns = 0
         self.last_rejection = ""
+        self.last_rejection_code = 0     # protocol reject reason of the last refused command
 
     def set_time_scale(self, scale: float) -> None:
         """Simulated seconds per wall second, in (0, 100]."""
@@ -60,6 +61,7 @@ class SimRuntime:
         except CommandError as exc:
             self.commands_rejected += 1
             self.last_rejection = str(exc)
+            self.last_rejection_code = exc.code
             return self.last_rejection
         self._pending = command
         return None

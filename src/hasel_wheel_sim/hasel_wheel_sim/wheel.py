@@ -12,6 +12,8 @@ from typing import Literal
 
 import numpy as np
 
+from hasel_wheel_common import protocol as P
+
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import advance
 from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, Extensions, param_vector
@@ -35,7 +37,12 @@ ANGLE_TOLERANCE = 1e-6
 
 
 class CommandError(ValueError):
-    """An actuation command is not acceptable; the message says what would be."""
+    """An actuation command is not acceptable; the message says what would be, :attr:`code`
+    is the protocol's reject reason (``R_N_A``, ``R_ANGLE`` or ``R_ORDER``)."""
+
+    def __init__(self, message: str, code: int) -> None:
+        super().__init__(message)
+        self.code = code
 
 
 def validate_command(n_a: int, phi_a: float, phi_d: float) -> None:
@@ -43,19 +50,21 @@ def validate_command(n_a: int, phi_a: float, phi_d: float) -> None:
     phi_a < phi_d, and both on the same side of 0 (both >= 0 accelerate, both <= 0 brake).
     """
     if isinstance(n_a, bool) or not isinstance(n_a, (int, np.integer)) or not 0 <= n_a < N_ACTUATORS:
-        raise CommandError(f"n_a = {n_a!r} is not an actuator index; expected an integer 0..15")
+        raise CommandError(f"n_a = {n_a!r} is not an actuator index; expected an integer 0..15",
+                           P.R_N_A)
     for name, v in (("phi_a", phi_a), ("phi_d", phi_d)):
         if not isinstance(v, (int, float, np.floating)) or not math.isfinite(v):
             raise CommandError(f"{name} = {v!r} is not a finite angle; expected rad in "
-                               f"[-pi/8, pi/8]")
+                               f"[-pi/8, pi/8]", P.R_ANGLE)
         if abs(v) > SECTOR + ANGLE_TOLERANCE:
             raise CommandError(f"{name} = {v!r} rad is outside [-pi/8, pi/8] = "
-                               f"[-{SECTOR:.6f}, {SECTOR:.6f}] rad")
+                               f"[-{SECTOR:.6f}, {SECTOR:.6f}] rad", P.R_ANGLE)
     if not phi_a < phi_d:
-        raise CommandError(f"phi_a = {phi_a!r} rad must be smaller than phi_d = {phi_d!r} rad")
+        raise CommandError(f"phi_a = {phi_a!r} rad must be smaller than phi_d = {phi_d!r} rad",
+                           P.R_ORDER)
     if phi_a < 0.0 < phi_d:
         raise CommandError(f"phi_a = {phi_a!r} and phi_d = {phi_d!r} rad straddle 0; use both "
-                           f">= 0 to accelerate or both <= 0 to brake")
+                           f">= 0 to accelerate or both <= 0 to brake", P.R_ORDER)
 
 
 def initial_state(xi1: float = 0.0, xi2: float = 0.0, mode: SwitchMode = "exact") -> np.ndarray:

@@ -136,8 +136,7 @@ def test_runs_of_one_wheel_share_its_gains_and_draw_their_own_noise():
     readings = {tuple(p.step().angle for _ in range(300)) for p in plants}
     assert len(readings) == 3                       # same wheel, same start, its own noise
     for bad in (0, 2.5, True):
-        with pytest.raises(ParameterError, match=f"runs = {bad!r}: expected a whole number of "
-                                                 f"recordings, at least 1"):
+        with pytest.raises(ParameterError, match=f"runs = {bad!r}"):
             run_configs(cfg, bad, same_wheel=True)
 
 

@@ -38,19 +38,19 @@ def _good():
 
 
 @pytest.mark.parametrize("mutate, match", [
-    (lambda d: d["wheel"].pop("tau_f"), r"missing field\(s\) \['tau_f'\]"),
-    (lambda d: d["wheel"].update(mass={"value": 1.0, "unit": "kg"}), r"unknown field\(s\) \['mass'\]"),
-    (lambda d: d["wheel"]["r"].update(unit="mm"), r"'r' has unit 'mm'; expected 'm'"),
-    (lambda d: d["wheel"]["M"].update(value=-1.0), r"'M' = -1.0 is out of range; allowed range is \(0, 100\] kg"),
-    (lambda d: d["wheel"]["M"].update(value=float("nan")), r"'M' = nan is not finite"),
-    (lambda d: d["wheel"]["tau_f"].update(value=float("inf")), r"'tau_f' = inf is not finite"),
-    (lambda d: d["wheel"]["sigma5"].update(value=0.0), r"'sigma5' = 0.0 is out of range.*non-zero"),
-    (lambda d: d["wheel"]["sigma3"].update(value=0.0), r"'sigma3' = 0.0 is out of range; allowed range is \(0"),
-    (lambda d: d["wheel"]["L"].update(value="long"), r"'L' = 'long' is not a number"),
-    (lambda d: d["wheel"]["L"].update(value=True), r"'L' = True is not a number"),
-    (lambda d: d["wheel"].update(I1=0.007), r"'I1' must be written as \{value: <number>, unit: 'kg\*m\^2'\}"),
-    (lambda d: d.update(wheel=[1, 2]), r"expected a mapping of fields"),
-    (lambda d: d.pop("wheel"), r"expected a top-level 'wheel:' section"),
+    (lambda d: d["wheel"].pop("tau_f"), r"\['tau_f'\]"),
+    (lambda d: d["wheel"].update(mass={"value": 1.0, "unit": "kg"}), r"\['mass'\]"),
+    (lambda d: d["wheel"]["r"].update(unit="mm"), r"'r'.*'mm'.*'m'"),
+    (lambda d: d["wheel"]["M"].update(value=-1.0), r"'M' = -1.0.*\(0, 100\] kg"),
+    (lambda d: d["wheel"]["M"].update(value=float("nan")), r"'M' = nan"),
+    (lambda d: d["wheel"]["tau_f"].update(value=float("inf")), r"'tau_f' = inf"),
+    (lambda d: d["wheel"]["sigma5"].update(value=0.0), r"'sigma5' = 0.0"),
+    (lambda d: d["wheel"]["sigma3"].update(value=0.0), r"'sigma3' = 0.0.*\(0"),
+    (lambda d: d["wheel"]["L"].update(value="long"), r"'L' = 'long'"),
+    (lambda d: d["wheel"]["L"].update(value=True), r"'L' = True"),
+    (lambda d: d["wheel"].update(I1=0.007), r"'I1'.*'kg\*m\^2'"),
+    (lambda d: d.update(wheel=[1, 2]), r"wheel"),
+    (lambda d: d.pop("wheel"), r"'wheel:'"),
 ])
 def test_bad_wheel_files_name_the_field_and_range(tmp_path, mutate, match):
     data = _good()
@@ -60,40 +60,40 @@ def test_bad_wheel_files_name_the_field_and_range(tmp_path, mutate, match):
 
 
 def test_unreadable_and_malformed_files(tmp_path):
-    with pytest.raises(ParameterError, match=r"cannot read parameter file"):
+    with pytest.raises(ParameterError, match=r"missing\.yaml"):
         load_wheel_params(tmp_path / "missing.yaml")
-    with pytest.raises(ParameterError, match=r"not valid YAML"):
+    with pytest.raises(ParameterError, match=r"p\.yaml"):
         load_wheel_params(_write(tmp_path, None, raw="wheel: {M: [unclosed"))
 
 
 def test_empty_file_is_a_clear_error(tmp_path):
-    with pytest.raises(ParameterError, match=r"expected a top-level 'wheel:' section"):
+    with pytest.raises(ParameterError, match=r"'wheel:'"):
         load_wheel_params(_write(tmp_path, None, raw=""))
 
 
 def test_nan_written_as_yaml_is_rejected(tmp_path):
     raw = yaml.safe_dump(_good()).replace("value: 0.979", "value: .nan")
-    with pytest.raises(ParameterError, match=r"'M' = nan is not finite"):
+    with pytest.raises(ParameterError, match=r"'M' = nan"):
         load_wheel_params(_write(tmp_path, None, raw=raw))
 
 
 def test_constructor_validates_too():
-    with pytest.raises(ParameterError, match=r"'r' = 0.0 is out of range"):
+    with pytest.raises(ParameterError, match=r"'r' = 0.0"):
         WheelParams(r=0.0)
-    with pytest.raises(ParameterError, match="missing"):
+    with pytest.raises(ParameterError, match=r"\['I1', .*'tau_f'\]"):
         wheel_params_from_mapping({})
 
 
 @pytest.mark.parametrize("effects, match", [
-    ({"wobble": {"enabled": True}}, r"unknown effect\(s\) \['wobble'\]"),
-    ({"viscous_drag": {"enabled": "yes"}}, r"viscous_drag: expected \{enabled: true\|false"),
-    ({"viscous_drag": {"enabled": True}}, r"missing field\(s\) \['coefficient'\]"),
+    ({"wobble": {"enabled": True}}, r"\['wobble'\]"),
+    ({"viscous_drag": {"enabled": "yes"}}, r"viscous_drag"),
+    ({"viscous_drag": {"enabled": True}}, r"\['coefficient'\]"),
     ({"viscous_drag": {"enabled": True, "coefficient": {"value": 0.1, "unit": "N*m*s"}}},
-     r"'coefficient' has unit 'N\*m\*s'; expected 'N\*m\*s/rad'"),
+     r"'coefficient'.*'N\*m\*s'.*'N\*m\*s/rad'"),
     ({"dropouts": {"enabled": True, "probability": {"value": 1.5, "unit": "1"}}},
      r"'probability' = 1.5 is out of range"),
-    ({"actuator_gains": [1.0] * 15}, r"actuator_gains: expected a list of 16"),
-    ({"actuator_gains": [1.0] * 15 + [float("nan")]}, r"actuator_gains: expected a list of 16"),
+    ({"actuator_gains": [1.0] * 15}, r"actuator_gains.*16"),
+    ({"actuator_gains": [1.0] * 15 + [float("nan")]}, r"actuator_gains.*16"),
 ])
 def test_bad_effects_are_named(effects, match):
     with pytest.raises(ParameterError, match=match):
@@ -106,10 +106,10 @@ def test_disabled_effect_may_omit_values_and_stays_off():
 
 
 @pytest.mark.parametrize("plant, match", [
-    ({"seed": -1}, r"seed = -1: expected a non-negative integer"),
+    ({"seed": -1}, r"seed = -1"),
     ({"seed": 1.5}, r"seed = 1.5"),
-    ({"switching": "fast"}, r"switching = 'fast': expected 'exact'"),
-    ({"speed": 1}, r"unknown key\(s\) \['speed'\]"),
+    ({"switching": "fast"}, r"switching = 'fast'"),
+    ({"speed": 1}, r"\['speed'\]"),
 ])
 def test_bad_plant_config(plant, match):
     with pytest.raises(ParameterError, match=match):

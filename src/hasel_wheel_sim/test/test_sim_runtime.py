@@ -3,6 +3,8 @@ import math
 
 import pytest
 
+from hasel_wheel_common import protocol as P
+
 from hasel_wheel_common.samples import Command
 from hasel_wheel_sim.sim_runtime import MAX_TICKS_PER_CALL, SimRuntime
 from hasel_wheel_sim.wheel import TICK
@@ -20,7 +22,7 @@ def test_scaled_time():
     rt.run_until(0.0)
     total = sum(len(rt.run_until(k * 0.01)) for k in range(1, 11))
     assert total == 300 and rt.plant.t == pytest.approx(1.0, abs=1e-9)
-    with pytest.raises(ValueError, match=r"time_scale = 0: expected a number in \(0, 100\]"):
+    with pytest.raises(ValueError, match=r"time_scale = 0"):
         rt.set_time_scale(0)
 
 
@@ -30,19 +32,18 @@ def test_falling_behind_is_counted_not_hidden():
     assert len(rt.run_until(10.0)) == MAX_TICKS_PER_CALL and rt.overruns == 1
 
 
-@pytest.mark.parametrize("cmd, match", [
-    (Command(16, 0.05, 0.38), r"n_a = 16 is not an actuator index; expected an integer 0..15"),
-    (Command(3, math.nan, 0.38), r"phi_a = nan is not a finite angle"),
-    (Command(3, 0.05, 0.5), r"phi_d = 0.5 rad is outside \[-pi/8, pi/8\]"),
-    (Command(3, 0.3, 0.1), r"must be smaller than phi_d"),
-    (Command(3, -0.1, 0.1), r"straddle 0"),
+@pytest.mark.parametrize("cmd, code, field", [
+    (Command(16, 0.05, 0.38), P.R_N_A, "n_a = 16"),
+    (Command(3, math.nan, 0.38), P.R_ANGLE, "phi_a = nan"),
+    (Command(3, 0.05, 0.5), P.R_ANGLE, "phi_d = 0.5"),
+    (Command(3, 0.3, 0.1), P.R_ORDER, "phi_a = 0.3"),
+    (Command(3, -0.1, 0.1), P.R_ORDER, "phi_a = -0.1"),
 ])
-def test_bad_commands_are_rejected_and_never_switch_hv(cmd, match):
+def test_bad_commands_are_rejected_and_never_switch_hv(cmd, code, field):
     rt = SimRuntime(initial_speed=2.0)
     reason = rt.submit(cmd)
-    assert reason is not None
-    import re
-    assert re.search(match, reason)
+    assert rt.last_rejection_code == code == P.check_command(cmd.n_a, cmd.phi_a, cmd.phi_d)
+    assert reason is not None and field in reason
     outs = [rt.step() for _ in range(300)]
     assert all(o.truth.q == 0 for o in outs)          # no target latched, HV stays off
     assert rt.commands_rejected == 1 and rt.diagnostics()["commands_rejected"] == "1"
