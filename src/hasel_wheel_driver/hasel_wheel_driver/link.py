@@ -12,6 +12,7 @@ import select
 import threading
 import time
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Callable
 
 import serial
@@ -19,6 +20,28 @@ import serial
 from hasel_wheel_common import protocol as P
 from hasel_wheel_common.samples import ENCODER_COUNT as COUNT
 from hasel_wheel_common.samples import Command, TelemetrySample
+
+
+class RefusalCode(IntEnum):
+    """Why :meth:`DriverCore.send_command` sent nothing: the protocol's reject reasons for a
+    command that breaks its ranges, and two of the host's own."""
+
+    N_A = P.R_N_A              # n_a outside 0..15
+    ANGLE = P.R_ANGLE          # an angle not finite or outside [-pi/8, pi/8]
+    ORDER = P.R_ORDER          # not phi_a < phi_d on one side of 0
+    NO_LINK = 100              # no port open
+    CLOSING = 101              # shutdown has begun: ESTOP and HV(0) are the last frames
+
+
+class Refusal(str):
+    """The text of a refused command (for a reader), with its :attr:`code`."""
+
+    code: RefusalCode
+
+    def __new__(cls, text: str, code: RefusalCode) -> "Refusal":
+        refusal = super().__new__(cls, text)
+        refusal.code = code
+        return refusal
 
 
 @dataclass(frozen=True)
@@ -110,7 +133,7 @@ class DriverCore:
                 self._write(P.Heartbeat(int(now * 1e6)))
             time.sleep(self.config.heartbeat_period)
 
-    def send_command(self, cmd: Command) -> str | None:
+    def send_command(self, cmd: Command) -> Refusal | None:
         """Validate and send u; return why it was refused (nothing sent), or None."""
         reason = P.check_command(cmd.n_a, cmd.phi_a, cmd.phi_d)
         if reason:
@@ -120,12 +143,12 @@ class DriverCore:
                               f"and within [-pi/8, pi/8]",
                    P.R_ORDER: f"need phi_a < phi_d on one side of 0 (accelerate: 0 <= phi_a < "
                               f"phi_d; brake: phi_a < phi_d <= 0), got {cmd.phi_a!r}, {cmd.phi_d!r}"}
-            return why[reason]
+            return Refusal(why[reason], RefusalCode(reason))
         if not self.connected:
-            return "no link to the wheel"
+            return Refusal("no link to the wheel", RefusalCode.NO_LINK)
         seq = cmd.sequence or self._next_seq()
         if self._write(P.Command(seq, cmd.n_a, cmd.phi_a, cmd.phi_d)) is None:
-            return "shutting down: no command after ESTOP / HV off"
+            return Refusal("shutting down: no command after ESTOP / HV off", RefusalCode.CLOSING)
         self.stats.commands_sent += 1
         return None
 
