@@ -1,15 +1,15 @@
-"""Benchmark of the bag tools (issue 6): write rate, and ``bag info`` / ``bag metrics`` on
-long recordings, with peak memory.
+"""Benchmark of the bag tools: write rate, and ``bag info`` / ``bag metrics`` on long
+recordings, with peak memory.
 
 A synthetic recording of one wheel: telemetry, joint state, state estimate and true state at
 300 Hz, an MPC status and a command at 5 Hz, the reference every 40 s: 1,210 messages per
-second of bag time.  The issue's "1-hour bag of about 1 M messages" has about 280 per second;
-the same million comes here from 14 minutes.  The recording is written with the project's
-BagWriter (as the embedded runner does) for 14 and 28 minutes (1 M and 2 M messages), and
-each tool runs in a fresh process so that its peak memory (ru_maxrss) is its own.  The
-issue's targets: ``metrics`` on about 1 M messages in <= 30 s, and peak memory that does not
-grow with the bag's length (the two lengths show whether it does); ``info`` counts every
-message back (zero drops: the writer is synchronous, nothing is queued and discarded).
+second of bag time, so 14 minutes make about 1 M messages (a 1-hour bag at about 280 messages
+per second).  The recording is written with the project's BagWriter (as the embedded runner
+does) for 14 and 28 minutes (1 M and 2 M messages), and each tool runs in a fresh process so
+that its peak memory (ru_maxrss) is its own.  Targets: ``metrics`` on about 1 M messages in
+<= 30 s; peak memory that does not grow with the bag's length (the two lengths show whether
+it does); ``info`` counts every message back (zero drops: the writer is synchronous, nothing
+is queued and discarded).
 
 Run: ``.venv/bin/python benchmarks/bench_bag.py`` (about 6 minutes; part of ``./dev bench``).
 """

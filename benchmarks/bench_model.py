@@ -1,4 +1,4 @@
-"""Benchmark of the hybrid model and the plant (issue: foundation).
+"""Benchmark of the hybrid model and the plant.
 
 Prints, on one core:
 * one wheel through ``Plant.step`` (the embedded runner's loop), effects off and all on:
@@ -6,7 +6,8 @@ Prints, on one core:
 * N wheels / parameter sets advanced together by the compiled batch integrator:
   wheel-seconds per wall second (target >= 20,000 at N = 256);
 * where a batch tick goes (bookkeeping against the force law), and the same batch compiled
-  as before ``jit.jit_kernel`` (reference counting on, tick not inlined) for comparison.
+  with plain ``numba.njit`` (reference counting on, tick not inlined) beside
+  ``jit.jit_kernel``'s.
 
 Run: ``./dev bench`` or ``.venv/bin/python benchmarks/bench_model.py``.
 """
@@ -73,9 +74,9 @@ def batch(n_wheels: int, seconds: float = 20.0, repeats: int = 3, fn=simulate_ba
 
 
 def refcounted_batch():
-    """simulate_batch as it was before ``jit.jit_kernel``: the tick function compiled with
-    numba's reference counting on and called, not inlined, once per tick.  The same
-    arithmetic (bit-identical results); only the compilation differs."""
+    """simulate_batch compiled with plain ``numba.njit`` instead of ``jit.jit_kernel``: the
+    tick function with numba's reference counting on, called (not inlined) once per tick.
+    The same arithmetic (bit-identical results); only the compilation differs."""
     import numba
 
     from hasel_wheel_sim import integrator
@@ -162,7 +163,7 @@ def main() -> None:
     print(f"  law (bookkeeping only: {bare:6.0f} wheel-s per wall-s) {bare_ns:5.0f} ns; "
           f"one log + exp + sin costs {ns:.1f} ns,")
     print("  and an RK4 step evaluates the force law 4 times while an actuator is on (~half the time)")
-    print(f"  the same batch compiled as before jit_kernel (reference counting on, tick not inlined): "
+    print(f"  the same batch compiled with plain njit (reference counting on, tick not inlined): "
           f"{before_rate:6.0f} wheel-s per wall-s, bookkeeping {1e9 / before_bare / 300:4.0f} ns per tick")
     call_us, elem_ns = numpy_costs()
     print(f"  numpy instead (why the batch is compiled): {call_us:.2f} us per call at N = 256, "

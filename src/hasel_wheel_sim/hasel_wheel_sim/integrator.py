@@ -259,7 +259,7 @@ def _advance(s: np.ndarray, pv: np.ndarray, h: float, ev: np.ndarray) -> int:
 #: One tick of one wheel (``_advance``), called from Python, the plant and the MPC.
 advance = jit_kernel(_advance)
 #: The same function inlined into :func:`run_wheel`'s loop, which saves a call per tick
-#: (bench_model.py prints the batch's bookkeeping per tick, and the old way's).
+#: (bench_model.py prints the batch's bookkeeping per tick, inlined and called).
 _advance_inline = jit_inline(_advance)
 
 

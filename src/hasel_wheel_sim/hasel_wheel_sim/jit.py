@@ -72,7 +72,8 @@ def jit_inline(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Like :func:`jit`, and inlined into compiled callers (``inline='always'``).
 
     For the small functions of the RK4 inner loop: a compiled call that passes arrays pays
-    reference counting on every call, which cost more than the arithmetic (measured).
+    reference counting on every call, which costs more than the arithmetic
+    (bench_model.py prints both).
     """
     if HAVE_NUMBA:
         return numba.njit(cache=bool(numba.config.CACHE_DIR), nogil=True, inline="always")(fn)

@@ -289,7 +289,7 @@ def unwrap_target(n_a: float, phi_a: float, xi1: float) -> float:
     """Unwrapped target sector N = n_a + 16 k for the command u = (n_a, phi_a, phi_d).
 
     Actuator indices run modulo 16 while xi1 keeps growing, so (49)-(50) need the unwrapped
-    sector (model-notes.md).  We take the first *future* switch-on of actuator n_a: the
+    sector (docs/model.md).  We take the first *future* switch-on of actuator n_a: the
     smallest N == n_a (mod 16) with N pi/8 + phi_a >= xi1, i.e. Delta+ >= 0.  So the step
     from actuator 15 to 0 becomes 15 -> 16, and braking targets (phi_a < 0) land two
     sectors ahead as Sec. III-D intends.

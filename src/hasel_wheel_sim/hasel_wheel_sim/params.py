@@ -6,7 +6,7 @@ radians).  Anything missing, non-finite, of the wrong unit or outside its physic
 range raises :class:`ParameterError` naming the field and the allowed range.
 
 The defaults are the paper's Table I, its friction torque (Sec. IV-A) and force
-parameters (Sec. IV-C), read as described in ``model-notes.md`` (the pivot arm's
+parameters (Sec. IV-C), read as described in ``docs/model.md`` (the pivot arm's
 "I21" is its I33).
 """
 from __future__ import annotations

@@ -15,7 +15,7 @@ def fall_time(params, brake, mode="exact"):
 def test_friction_alone_matches_the_closed_form(params):
     a = params.friction_torque / params.inertia
     assert fall_time(params, brake=False) == pytest.approx(0.6 / a, abs=TICK)
-    assert 0.6 / a == pytest.approx(1.66, abs=0.01)          # model-notes: "about 1.7 s"
+    assert 0.6 / a == pytest.approx(1.66, abs=0.01)          # docs/model.md: "about 1.7 s"
 
 
 def test_braking_is_faster_and_scales_with_brake_gain(params):

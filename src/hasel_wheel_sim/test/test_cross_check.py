@@ -1,4 +1,4 @@
-"""Open-loop steady speed and t90 against model-notes.md's independent implementation
+"""Open-loop steady speed and t90 against docs/model.md's independent implementation
 (phi_d = 22 deg, 1 rad/s at phi = 0, 60 s, sequential targets), within 2 %."""
 import math
 
@@ -9,7 +9,7 @@ from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.trials_support import open_loop_speed
 from hasel_wheel_sim.wheel import TICK
 
-# phi_a [deg] -> exact w_ss [rad/s], exact t90 [s], tick w_ss [rad/s]   (model-notes.md)
+# phi_a [deg] -> exact w_ss [rad/s], exact t90 [s], tick w_ss [rad/s]   (docs/model.md)
 NOTES = {1: (4.73, 26.6, 3.84), 5: (3.42, 22.5, 3.08), 9: (2.06, 16.1, 2.33), 11: (1.37, 9.8, 1.52)}
 
 

@@ -29,14 +29,14 @@ def test_force_law_is_equation_43(pv):
 
 
 def test_force_bump_peaks_near_exp_sigma4(pv):
-    # model-notes: with sigma4 = -1.004 the bump peaks near exp(-1.004) = 0.37 rad
+    # docs/model.md: with sigma4 = -1.004 the bump peaks near exp(-1.004) = 0.37 rad
     xs = np.linspace(0.25, 0.45, 20001)
     f = np.array([force_law(x, 0.0, 0.0, pv) / x for x in xs])  # divide out the rise term
     peak = xs[np.argmax(f)]
     # d/dx of -s1 ln x - (ln x - s4)^2/s5^2 = 0  ->  ln x = s4 - s1 s5^2 / 2
     p = WheelParams()
     assert peak == pytest.approx(math.exp(p.sigma4 - p.sigma1 * p.sigma5**2 / 2), abs=2e-5)
-    # "practically zero below 17 deg" (model-notes): 1.6 % of the peak there, falling fast
+    # "practically zero below 17 deg" (docs/model.md): 1.6 % of the peak there, falling fast
     assert force_law(D(17), 0.0, 0.0, pv) / D(17) < 0.02 * f.max()
     assert force_law(D(14), 0.0, 0.0, pv) / D(14) < 1e-4 * f.max()
 

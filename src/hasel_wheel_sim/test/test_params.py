@@ -19,7 +19,7 @@ def test_packaged_defaults_are_the_paper_values():
 
 
 def test_inertia_matches_model_notes(params):
-    # model-notes: J = L*I1 + L*M*r^2 + I33*r^2/L ~= 0.02301 (with the factor L)
+    # docs/model.md: J = L*I1 + L*M*r^2 + I33*r^2/L ~= 0.02301 (with the factor L)
     J = params.L * params.I1 + params.L * params.M * params.r**2 + params.I33 * params.r**2 / params.L
     assert J == pytest.approx(0.02301, abs=5e-6)
     assert params.inertia * params.L == pytest.approx(J, rel=1e-12)
