@@ -6,6 +6,9 @@
   virtual Teensy in its own process at 300 Hz (target p99 < 1 ms);
 * a host whose reader pauses: frames the device lost (always whole: the stream stays framed)
   and frames the host found damaged (target 0), by length of the pause.
+* the open-loop sequencer at 5x time through the driver: commands that reached the device too
+  late for their pad (target <= 1 %), and the driver's frame rate (target 1500 /s within 10 %);
+* replug -> telemetry with HV on again (target < 1 s), and host silence -> device HV off.
 
 Run: ``./dev bench`` or ``.venv/bin/python benchmarks/bench_link.py``.
 """
@@ -107,6 +110,44 @@ def host_pause(pause: float, scale: float = 5.0) -> tuple[int, int, int]:
     return rep.write_drops, st.crc_errors + st.framing_errors + st.oversize, len(got)
 
 
+def closed_loop_at_scale(seconds: float = 30.0, scale: float = 5.0) -> dict[str, float]:
+    """The open-loop Sequencer (phi_a 3 deg, phi_d 22 deg) driving the device at ``scale`` x
+    real time for ``seconds`` of device time through the driver.  Returns the commands sent,
+    those that never switched on their pad (``late``: they reached the device after that
+    pad's switch-on angle; the host's latency in device time), the wheel speed at the end
+    [rad/s] and the driver's telemetry frame rate [frames per wall second] at the end."""
+    from hasel_wheel_bringup.sequencer import Sequencer
+
+    cfg = P.Config(telemetry_rate_hz=300, watchdog_ms=1000, max_on_ms=2000, drain_mode=0)
+    link = Path(tempfile.mkdtemp()) / "teensy"
+    dev = DeviceProcess(link, w0=2.0, time_scale=scale)
+    ctrl = Sequencer(np.radians(3.0), np.radians(22.0))
+    samples: list = []
+    sent: list[tuple[int, int]] = []
+    core: DriverCore
+
+    def on_sample(s) -> None:
+        samples.append(s)
+        cmd = ctrl.step(s)
+        if cmd is not None and core.send_command(cmd) is None:
+            sent.append((cmd.sequence, cmd.n_a))
+    core = DriverCore(LinkConfig(str(link), heartbeat_period=0.02, link_timeout=0.25,
+                                 enable_hv_on_connect=True, device_config=cfg),
+                      on_sample=on_sample)
+    core.start()
+    while not (samples and samples[-1].hv_monitor > 0):
+        time.sleep(0.01)
+    t_end = dev.status()["t"] + seconds
+    while dev.status()["t"] < t_end:
+        time.sleep(0.05)
+    speed, rate = dev.status()["speed"], float(core.diagnostics()["frame_rate_hz"])
+    core.shutdown()
+    dev.stop()
+    switched = {(s.last_command_sequence, s.eta) for s in samples if s.q == 1}
+    late = sum((seq, pad) not in switched for seq, pad in sent[:-2])
+    return {"commands": len(sent) - 2, "late": late, "speed": speed, "rate": rate}
+
+
 def main() -> None:
     cores = os.sched_getaffinity(0)
     os.sched_setaffinity(0, {min(cores)})
@@ -123,6 +164,11 @@ def main() -> None:
         lost, damaged, n = host_pause(pause)
         print(f"  host reader paused {pause:.1f} s at 5x ({pause * 5:.1f} s of device time): "
               f"{lost} frames lost whole, {damaged} damaged, of {n + lost}   (target 0 damaged)")
+    loop = closed_loop_at_scale()
+    print(f"  sequencer at 5x for 30 s of device time: {loop['late']} of {loop['commands']} commands "
+          f"late for their pad   (target <= 1 %); wheel at {loop['speed']:.2f} rad/s")
+    print(f"  driver frame rate at 5x                : {loop['rate']:.0f} frames/s   "
+          f"(target 1500 within 10 %)")
     back, wd = reconnect_and_watchdog()
     print(f"  replug -> telemetry with HV on again : {', '.join(f'{b * 1e3:.0f}' for b in back)} ms"
           f"   (target < 1000 ms; backoff cap 250 ms)")

@@ -10,10 +10,12 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.firmware import Firmware
-from hasel_wheel_sim.plant import Plant
+from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.pty_device import HostFrame, LinkFaults, SentFrame, VirtualTeensy
 
 
@@ -33,6 +35,7 @@ class DeviceReport:
     faults_seen: list[str] = field(default_factory=list)
     host_stream_dropped: int = 0    # host frames the device dropped (CRC, framing, ...)
     re_anchors: int = 0             # times the tick loop fell behind and re-anchored
+    watchdog_trips: int = 0         # times the device's watchdog switched HV off
 
 
 def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> None:
@@ -63,7 +66,8 @@ def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> No
             conn.send(DeviceReport(vt.sent, vt.received, vt.fw.hv_enabled, vt.fw.estop,
                                    vt.fw.faults, vt.fw.hv_off_t, vt.fw.plant.t,
                                    float(vt.fw.plant.wheel.s[L.S_XI2]), vt.write_drops,
-                                   vt.faults_seen, vt.decoder.stats.dropped, vt.re_anchors))
+                                   vt.faults_seen, vt.decoder.stats.dropped, vt.re_anchors,
+                                   vt.fw.watchdog_trips))
             return
         conn.send(None)
 
@@ -71,15 +75,21 @@ def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> No
 class DeviceProcess:
     """A :class:`VirtualTeensy` in its own process, as a real device would be (no shared GIL).
 
-    Control it with :meth:`unplug`, :meth:`plug`, :meth:`stall`, :meth:`mute`, :meth:`status`; :meth:`stop`
-    returns a :class:`DeviceReport` with the ground truth of every frame.
+    Control it with :meth:`unplug`, :meth:`plug`, :meth:`stall`, :meth:`mute`,
+    :meth:`status`; :meth:`stop` returns a :class:`DeviceReport` with the ground truth of
+    every frame.  ``test_link_end_to_end.py`` runs the driver against it.
     """
 
-    def __init__(self, link: str | os.PathLike, plant_config=None, params=None, w0: float = 0.0,
-                 time_scale: float = 1.0, faults: LinkFaults | None = None) -> None:
+    #: Seconds the process may take to come up (it compiles the model core on a cold cache).
+    START_TIMEOUT = 600.0
+
+    def __init__(self, link: str | os.PathLike, plant_config: PlantConfig | None = None,
+                 params: WheelParams | None = None, w0: float = 0.0, time_scale: float = 1.0,
+                 faults: LinkFaults | None = None) -> None:
+        """Start the device at wheel speed ``w0`` [rad/s] and ``time_scale`` x real time, its
+        pty published at ``link``; returns once the link exists."""
         import multiprocessing as mp
 
-        from hasel_wheel_sim.plant import PlantConfig
         ctx = mp.get_context("spawn")
         self._conn, child = ctx.Pipe()
         self.link = Path(link)
@@ -87,33 +97,39 @@ class DeviceProcess:
                                  args=(child, plant_config or PlantConfig(switching="tick"), params,
                                        w0, str(link), time_scale, faults))
         self._proc.start()
-        t_end = time.monotonic() + 180.0       # a fresh clone compiles the core first
+        t_end = time.monotonic() + self.START_TIMEOUT
         while not self.link.is_symlink():      # the child compiles and plugs in
             if time.monotonic() > t_end or not self._proc.is_alive():
                 self._proc.kill()
                 raise RuntimeError("the virtual Teensy process did not come up")
             time.sleep(0.01)
 
-    def _call(self, cmd: str, arg=None):
+    def _call(self, cmd: str, arg: float | None = None) -> Any:
         self._conn.send((cmd, arg))
         return self._conn.recv()
 
     def unplug(self) -> None:
+        """Remove the device (see :meth:`VirtualTeensy.unplug`)."""
         self._call("unplug")
 
     def plug(self) -> None:
+        """Plug it in again: a new pty, the firmware powered up (HV off)."""
         self._call("plug")
 
     def stall(self, seconds: float) -> None:
+        """Neither talk nor listen for ``seconds`` of wall time."""
         self._call("stall", seconds)
 
     def mute(self, seconds: float) -> None:
+        """Send no new frames and read none for ``seconds`` of wall time; the queue drains."""
         self._call("mute", seconds)
 
     def status(self) -> dict:
+        """:meth:`VirtualTeensy.status` of the device now."""
         return self._call("status")
 
     def stop(self) -> DeviceReport:
+        """Stop the device and its process; the ground truth of the run."""
         report = self._call("stop")
         self._proc.join(timeout=5)
         return report

@@ -95,6 +95,7 @@ class VirtualTeensy:
         self._prev_delim_intact = True
         self._txq = bytearray()               # bytes not yet written to the pty
         self._txq_frames: deque[list[int]] = deque()   # [index in sent, bytes still queued]
+        self._last_sample_seq = 0             # of the last telemetry frame queued
 
     # -- lifecycle ----------------------------------------------------------------------
     def warm_up(self) -> None:
@@ -113,11 +114,14 @@ class VirtualTeensy:
         return self
 
     def status(self) -> dict:
-        """Device time [s], HV enabled, wheel speed [rad/s], frames received and sent."""
+        """Device time ``t`` [s], ``hv_enabled``, wheel ``speed`` [rad/s], frames
+        ``received`` and ``sent``, frames still ``queued`` for the pty, and the sample_seq of
+        the last telemetry frame that went into the queue (``last_sample_seq``, 0 if none)."""
         with self._lock:
             return {"t": self.fw.plant.t, "hv_enabled": self.fw.hv_enabled,
                     "speed": float(self.fw.plant.wheel.s[L.S_XI2]),
-                    "received": len(self.received), "sent": len(self.sent)}
+                    "received": len(self.received), "sent": len(self.sent),
+                    "queued": len(self._txq_frames), "last_sample_seq": self._last_sample_seq}
 
     def stop(self) -> None:
         """Stop the device loop and unplug."""
@@ -270,6 +274,8 @@ class VirtualTeensy:
         self._prev_delim_intact = delim_ok
         self._txq += wire
         self._txq_frames.append([len(self.sent) - 1, len(wire)])
+        if isinstance(msg, P.Telemetry):
+            self._last_sample_seq = msg.sample_seq
         self._flush()
 
     def _lose_queue(self) -> None:
