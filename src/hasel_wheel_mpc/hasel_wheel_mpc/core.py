@@ -28,12 +28,11 @@ from hasel_wheel_sim.wheel import TICK
 from hasel_wheel_mpc.config import ControllerConfig
 from hasel_wheel_mpc.disturbance import IntegralEstimator
 from hasel_wheel_mpc.mpc import Decision, Mpc, next_pad
-from hasel_wheel_mpc.observer import Estimate
+from hasel_wheel_mpc.observer import Estimate, ObserverConfig
 
-D = math.radians
 #: (phi_a, phi_d) [rad] of the start command (sequence 0), and of any latched command whose
-#: sequence number the core did not send.
-START_ANGLES = (D(3.0), D(22.0))
+#: sequence number the core did not send: the observer's angles for an unknown command.
+START_ANGLES = (ObserverConfig.default_phi_a, ObserverConfig.default_phi_d)
 #: Decide on an idle wheel after this many samples with HV off [samples].
 IDLE_SAMPLES = 150
 #: Re-decide on a new reference only if the next switching is at least this far away [s].
