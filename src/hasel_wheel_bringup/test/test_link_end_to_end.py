@@ -65,15 +65,16 @@ class Recorder:
             self.sent.append((len(self.samples), cmd.sequence, cmd.n_a))
 
 
-def start(tmp_path, faults=None, w0=2.0, scale=SCALE, config=None):
+def start(tmp_path, faults=None, w0=2.0, scale=SCALE, config=None, link_timeout=0.25):
     """The device at ``scale`` x real time and the driver with the Sequencer; ``config``: the
-    device configuration the driver sends (default: SCALED_CONFIG when scaled, else none)."""
+    device configuration the driver sends (default: SCALED_CONFIG when scaled, else none);
+    ``link_timeout`` [s of wall time]: the driver's, after which it calls the link stale."""
     link = tmp_path / "usb-Teensyduino_HASEL_wheel-if00"
     vt = DeviceProcess(link, w0=w0, time_scale=scale, faults=faults)
     seq = Recorder()
     if config is None and scale != 1.0:
         config = SCALED_CONFIG
-    core = DriverCore(LinkConfig(str(link), heartbeat_period=0.02, link_timeout=0.25,
+    core = DriverCore(LinkConfig(str(link), heartbeat_period=0.02, link_timeout=link_timeout,
                                  enable_hv_on_connect=True, device_config=config),
                       on_sample=seq.on_sample)
     seq.core = core
@@ -328,16 +329,18 @@ def test_a_stalled_device_is_stale_to_the_host_and_switches_hv_off_itself(tmp_pa
     try:
         run_sim_seconds(vt, core, seq, 2.0)
         vt.stall(0.6)                                   # mute and deaf for 0.6 s of wall time
-        assert wait(lambda: core.stale, 1.0)            # host: no telemetry for 250 ms
-        assert wait(lambda: not core.stale, 2.0)        # telemetry resumed
-        assert wait(lambda: seq.samples[-1].hv_monitor > 0, 1.0)   # re-enabled as configured
+        # host: no telemetry for 250 ms of wall time (0.6 s is more, whatever the load)
+        assert wait(lambda: core.stats.stale_events >= 1, 30.0)
+        assert wait(lambda: not core.stale, 30.0)       # telemetry resumed
+        assert wait(lambda: seq.samples[-1].hv_monitor > 0, 30.0)  # re-enabled as configured
     finally:
         core.shutdown()
         rep = vt.stop()
-    assert core.stats.stale_events == 1 and core.stats.watchdog_trips == 1
-    # the device, hearing nothing during the stall, tripped its own watchdog: HV off
-    assert rep.faults & P.F_WATCHDOG or rep.hv_off_t is not None
-    assert core.diagnostics()["watchdog_trips"] == "1"
+    # the device, hearing nothing during the stall (3 s of device time), tripped its own
+    # watchdog: HV off, and the host counted the trip from the telemetry's fault bit
+    assert rep.watchdog_trips >= 1 and rep.hv_off_t is not None
+    assert core.stats.stale_events >= 1 and core.stats.watchdog_trips >= 1
+    assert core.diagnostics()["watchdog_trips"] == str(core.stats.watchdog_trips)
 
 
 def test_corruption_towards_the_device_is_dropped_there_and_the_link_survives(tmp_path):
@@ -366,23 +369,26 @@ def test_corruption_towards_the_device_is_dropped_there_and_the_link_survives(tm
 
 
 def test_a_device_that_was_not_scheduled_does_not_blame_the_host(tmp_path):
-    # The device process is suspended for 150 ms of wall time while the host keeps sending
-    # heartbeats.  Running the missed 45 ticks in a burst would advance device time by 150 ms
-    # with no host frame in between and trip the 100 ms watchdog; re-anchoring must not.
-    vt, core, seq = start(tmp_path, w0=3.0, scale=1.0)
+    # The device process is suspended for 1.5 s of wall time while the host keeps sending
+    # heartbeats.  Running the missed 450 ticks in a burst would advance device time by 1.5 s
+    # with no host frame in between and trip the 1000 ms watchdog; re-anchoring must not.
+    # (The longest watchdog and a 5 s link timeout: a host that a loaded machine wakes late
+    # must not trip either.)
+    vt, core, seq = start(tmp_path, w0=3.0, scale=1.0, config=SCALED_CONFIG, link_timeout=5.0)
     try:
         run_sim_seconds(vt, core, seq, 0.5)
         t_before = vt.status()["t"]
         os.kill(vt._proc.pid, signal.SIGSTOP)
-        time.sleep(0.15)
+        time.sleep(1.5)
         os.kill(vt._proc.pid, signal.SIGCONT)
         time.sleep(0.3)
         status = vt.status()
     finally:
         rep = vt.stop()
         core.shutdown()
-    assert status["hv_enabled"] and not rep.faults & P.F_WATCHDOG
+    assert status["hv_enabled"] and not rep.faults & P.F_WATCHDOG and rep.watchdog_trips == 0
     assert core.stats.watchdog_trips == 0
-    # device time skipped the suspension instead of catching up: 0.45 s of wall, ~0.3 s of ticks
-    assert status["t"] - t_before < 0.45 - 0.1
+    # device time skipped the suspension instead of catching up: 1.8 s of wall, at most
+    # 0.3 s of ticks and the catch-up limit besides (a device scheduled late runs fewer)
+    assert status["t"] - t_before < 1.8 - 1.0
 
