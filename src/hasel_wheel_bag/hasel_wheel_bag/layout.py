@@ -3,7 +3,8 @@
 A bag is a directory ``<name>/`` holding ``<name>_0.mcap`` and ``metadata.yaml`` (rosbag2
 metadata version 9, as Jazzy writes it); a lone ``.mcap`` file is read as a bag too.  A file
 was finished when it ends with the closing MCAP magic; one that does not was left by a
-recorder that was killed (:mod:`.recovery` reads it).
+recorder that was killed (:mod:`.recovery` reads it).  Errors carry a :class:`BagErrorCode`
+and warnings are :class:`BagNote` texts; ``test_bag_recovery.py`` holds both.
 """
 from __future__ import annotations
 

@@ -5,6 +5,7 @@ Messages are CDR-encoded (:mod:`.cdr_encode`) and every channel's schema is the 
 our tools all open the same bag.  The MCAP file also carries rosbag2's ``rosbag2`` metadata
 record and per-channel ``offered_qos_profiles`` / ``topic_type_hash``, as Jazzy's MCAP
 storage plugin writes them; ``metadata.yaml`` is rosbag2 metadata version 9.
+``test_bag_roundtrip.py`` holds these rules (rosbags reads every field back).
 """
 from __future__ import annotations
 
