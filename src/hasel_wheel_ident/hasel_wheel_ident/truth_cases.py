@@ -109,11 +109,13 @@ _COM = {"com_offset": {"enabled": True, "torque": {"value": 0.002, "unit": "N*m"
 #: effects in the library, alone, in the benchmark's order.  Tolerances: drag, rise lag and
 #: retention rate 10 %; the gain std 0.015 of the std the plant drew; a periodic torque 2 %
 #: and 0.02 rad (the off-centre mass absorbed by a bent force law: 10 % and 0.1 rad).  The
-#: cut is halving where the plant's own model more than halves the error, else the tool's
-#: bar (BAR); a miss is expected where the plant's own model cuts less than the bar.
+#: cut is the tool's bar (BAR) or, where the plant's own model cuts the error far more, a
+#: factor at least 10 % below the identified model's (held-out errors move by a few % with
+#: the BLAS kernels: their fold fits stop at an evaluation limit); a miss is expected where
+#: the plant's own model cuts less than the bar.
 IN_LIBRARY: tuple[Case, ...] = (
     Case("viscous drag 5e-4 N*m*s/rad", _drag(5e-4), "viscous_drag", {"c": 5e-4},
-         true_values={"c": 5e-4}, within={"c": (5e-4, 5e-5)}, min_cut=2.0),
+         true_values={"c": 5e-4}, within={"c": (5e-4, 5e-5)}, min_cut=1.8),
     Case("rise lag 20 ms", _rise(0.02), "rise_lag", {"tau": 0.02}, true_values={"tau": 0.02},
          within={"tau": (0.02, 0.002)}),
     Case("rise lag 20 ms", _rise(0.02), "rise_lag", {"tau": 0.02}, S.SHORT_SET,
@@ -230,19 +232,24 @@ def look_alike_code(res, case: LookAlike) -> tuple[str, str]:
 #: and with the whole library
 DRAG_OUTSIDE = _drag(1.5e-3)
 DRAG_SEED = 12
+#: the mean autocorrelation [1] of a residual left by the right model: half the tool's bar
+#: for a residual that is not white (residual.CORRELATED_SHARE, 0.01).  Right models leave
+#: -0.002 to 0.0035 (residual.autocorrelation_signature; this case 0.0021 with OpenBLAS's
+#: Haswell and SkylakeX kernels alike), the drag left out 0.069
+WHITE_SHARE = RES.CORRELATED_SHARE / 2
 
 
 def drag_failures(res, whole_library: bool) -> list[str]:
     """The conditions the drag case (DRAG_OUTSIDE) breaks, as codes; none when right.  With
     the whole library: ``viscous_drag`` alone named (else ``named``), no signature left
-    (``signatures``) and the mean autocorrelation below a third of the bar
+    (``signatures``) and the mean autocorrelation [1] below :data:`WHITE_SHARE`
     (``correlated``).  With its candidate left out: nothing named (``named``), one signature
     that is not periodic (``signatures``), and a falling trend (``trend``) significant at
     residual.TREND_SIGNIFICANCE."""
     d = res.diagnostics_after
     if whole_library:
         bad = {"named": res.chosen != ("viscous_drag",), "signatures": bool(d.signatures),
-               "correlated": not d.correlated_share < RES.CORRELATED_SHARE / 3}
+               "correlated": not d.correlated_share < WHITE_SHARE}
     else:
         tr = d.trend
         bad = {"named": res.chosen != (),
