@@ -38,7 +38,7 @@ else:
 
     @pytest.mark.launch_test
     def generate_test_description():
-        path = PathJoinSubstitution([FindPackageShare("hasel_wheel_mpc"), "launch",
+        path = PathJoinSubstitution([FindPackageShare("hasel_wheel_bringup"), "launch",
                                      "sim_closed_loop.launch.py"])
         return LaunchDescription([
             IncludeLaunchDescription(PythonLaunchDescriptionSource(path),
