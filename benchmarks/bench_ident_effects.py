@@ -50,7 +50,8 @@ from hasel_wheel_ident.identification import Identification  # noqa: E402
 from hasel_wheel_ident import synthetic as S  # noqa: E402
 from hasel_wheel_ident import truth_cases as T  # noqa: E402
 from hasel_wheel_ident import verdict as V  # noqa: E402
-from hasel_wheel_ident.consistency import caution, leans  # noqa: E402
+from hasel_wheel_ident.cautions import caution  # noqa: E402
+from hasel_wheel_ident.consistency import leans  # noqa: E402
 from hasel_wheel_ident.model_compare import compare_controllers  # noqa: E402
 from hasel_wheel_mpc.observer import ObserverConfig  # noqa: E402
 from hasel_wheel_sim.effects import REALISTIC, effects_from_mapping  # noqa: E402

@@ -1,5 +1,5 @@
 """Why a refit's values cannot be the effect they name: implausible values, or a stand-in
-for another effect (:mod:`.consistency`).  :class:`Refusals` judges each fit once and keeps
+for another effect (:mod:`.stand_ins`).  :class:`Refusals` judges each fit once and keeps
 what the report and the unexplained structure's description need."""
 from __future__ import annotations
 
@@ -7,11 +7,12 @@ from hasel_wheel_sim.params import WheelParams
 
 from hasel_wheel_ident.acceptance import implausibility
 from hasel_wheel_ident.candidates import Candidate
-from hasel_wheel_ident.consistency import (Consistency, drift_stand_in, lag_stand_in,
-                                           stand_in_reason, trial_consistency)
+from hasel_wheel_ident.consistency import Consistency
 from hasel_wheel_ident.data import Trial
 from hasel_wheel_ident.fit import FitResult
 from hasel_wheel_ident.reasons import Finding
+from hasel_wheel_ident.stand_ins import drift_stand_in, lag_stand_in, stand_in_reason
+from hasel_wheel_ident.trial_refit import trial_consistency
 
 
 class Refusals:

@@ -34,7 +34,7 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             (units "trial"), or span by span when the trials' speeds
                             differ by less than 1.2x ("span", each drive cut in up to
                             six), size ~ speed^k, and on the halves of each drive (size ~
-                            hv^h), as checked when it was added (ident/consistency.py);
+                            hv^h), as checked when it was added (trial_refit.py);
                             caution: a sentence for each warning (its size leans on
                             the speed short of refusal, or changes within the
                             trials), else null; an exponent and its p are null where
@@ -87,7 +87,7 @@ unexplained                [{axis, unit, period, amplitude_rad_s2, torque_N_m, p
                             true: a drift during the drive along axis "time", "hv_time"
                             or "speed" (residual.drive_trend; the axis of the measuring
                             device that takes up the most of it instead, when that axis
-                            shows it too: consistency.lead_device, residual.drift_along);
+                            shows it too: device_verdict.lead_device, residual.drift_along);
                             drift_devices {hv_loss,
                             on_lag: {value, unit, wald_p, sim_rmse_rad_s,
                             sim_rmse_model_rad_s, wald_p_together}}: each measuring
@@ -152,11 +152,13 @@ import numpy as np
 
 from hasel_wheel_ident.acceptance import near_misses
 from hasel_wheel_ident.candidates import BY_ID, Candidate
-from hasel_wheel_ident.consistency import Beside, Consistency, caution
+from hasel_wheel_ident.cautions import caution
+from hasel_wheel_ident.consistency import Consistency
 from hasel_wheel_ident.data import find_coasts
 from hasel_wheel_ident.evaluation import Evaluation
 from hasel_wheel_ident.fit import effect_wald_p, rest_tail
 from hasel_wheel_ident.identification import Identification
+from hasel_wheel_ident.measuring_devices import Beside
 from hasel_wheel_ident.metrics import TrialMetrics, pooled_rmse
 from hasel_wheel_ident.numerics import blas_in_use
 from hasel_wheel_ident.reasons import Reason
@@ -373,7 +375,7 @@ def consistency_json(c: Candidate, con: Consistency | None) -> dict | None:
     """The effect refitted trial by trial and on the halves of each drive, for the JSON."""
     if con is None:
         return None
-    speed = math.isfinite(con.exponent_sd)            # formed (see consistency._trend)
+    speed = math.isfinite(con.exponent_sd)            # formed (see size_trends.speed_trend)
     drift = math.isfinite(con.drift_sd)
     return {"units": con.unit,
             "speed_exponent": json_number(con.exponent) if speed else None,

@@ -1,5 +1,5 @@
 """What the final model leaves unexplained, sized and described: a drift measured beside
-each measuring device (:mod:`.consistency`), periodic signatures sized by a refit
+each measuring device (:mod:`.measuring_devices`), periodic signatures sized by a refit
 (:mod:`.periodic`), one force factor per actuator (:mod:`.actuator`), and what the library's
 refused effects say the structure is not.  A description, never a name."""
 from __future__ import annotations
@@ -9,13 +9,14 @@ from collections.abc import Callable
 
 from hasel_wheel_ident import actuator, periodic
 from hasel_wheel_ident.candidates import Candidate
-from hasel_wheel_ident.consistency import (DEVICE_TREND_AXIS, DEVICE_WORDS, HV_LOSS, ON_LAG,
-                                           can_measure_beside, can_measure_lag,
-                                           devices_verdict, lead_device, refit_beside)
 from hasel_wheel_ident.data import Trial
+from hasel_wheel_ident.device_verdict import devices_verdict, lead_device
 from hasel_wheel_ident.evaluation import Evaluation
 from hasel_wheel_ident.fit import FitResult, wald_p
 from hasel_wheel_ident.identification import Identification
+from hasel_wheel_ident.measuring_devices import (DEVICE_TREND_AXIS, DEVICE_WORDS, HV_LOSS,
+                                                 ON_LAG, can_measure_beside, can_measure_lag,
+                                                 refit_beside)
 from hasel_wheel_ident.metrics import drift_text, fitted_metrics, pooled_rmse
 from hasel_wheel_ident.refusals import Refusals
 from hasel_wheel_ident.residual import (TREND_SIGNIFICANCE, Signature, Trend, along_p,
@@ -43,8 +44,8 @@ def drift_signature(sig: Signature) -> bool:
 def device_axis(sig: Signature, trend: Trend | None, min_gain: float) -> str | None:
     """The axis to report the drift ``sig`` (the signature of ``trend``) along in place of
     the one the regression read, or None to keep it: the axis
-    (:data:`~.consistency.DEVICE_TREND_AXIS`) of the device that takes up the most of it
-    (:func:`~.consistency.lead_device` with ``min_gain`` [1]), when it differs from
+    (:data:`~.measuring_devices.DEVICE_TREND_AXIS`) of the device that takes up the most of it
+    (:func:`~.device_verdict.lead_device` with ``min_gain`` [1]), when it differs from
     ``sig``'s and the trend along it is significant (:func:`~.residual.along_p` under
     :data:`~.residual.TREND_SIGNIFICANCE`).  Tested in ``test_ident_residual.py``."""
     axis = DEVICE_TREND_AXIS.get(lead_device(sig.devices, min_gain))

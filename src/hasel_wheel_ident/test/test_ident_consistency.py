@@ -1,5 +1,5 @@
-"""An effect refitted trial by trial (ident/consistency.py): the trend of its size with the
-trials' speed against its closed form, and on plant data the right effect against a stand-in."""
+"""An effect refitted trial by trial (trial_refit.py and the modules it draws on): the trend
+of its size with the trials' speed against its closed form, and on plant data the right effect against a stand-in."""
 import dataclasses
 import math
 
@@ -8,7 +8,14 @@ import pytest
 from scipy import stats
 
 from hasel_wheel_ident import candidates as C
+from hasel_wheel_ident import cautions as CA
 from hasel_wheel_ident import consistency as K
+from hasel_wheel_ident import device_verdict as DV
+from hasel_wheel_ident import drive_cuts as DC
+from hasel_wheel_ident import measuring_devices as MD
+from hasel_wheel_ident import size_trends as T
+from hasel_wheel_ident import stand_ins as SI
+from hasel_wheel_ident import trial_refit as TR
 from hasel_wheel_ident import report_json as report
 from hasel_wheel_ident import synthetic as S
 from hasel_wheel_ident.reasons import Reason
@@ -28,7 +35,7 @@ def test_the_trend_is_the_weighted_regression_on_log_speed():
     a, b = 2.0, 0.7
     m = a + b * xc
     covs = [np.array([[s]]) for s in var]
-    k, sd, p = K._trend(m[:, None], covs, np.array([a]), list(v))
+    k, sd, p = T.speed_trend(m[:, None], covs, np.array([a]), list(v))
     assert k == pytest.approx(b / a, rel=1e-12)
     sd_b = 1 / math.sqrt(np.sum(w * xc ** 2))
     assert p == pytest.approx(2 * stats.norm.sf(b / sd_b), rel=1e-9)
@@ -38,19 +45,19 @@ def test_the_trend_is_the_weighted_regression_on_log_speed():
     # the direction of a 2-vector effect is projected out: the same sizes along (3, 4)/5
     d = np.array([0.6, 0.8])
     covs2 = [np.diag([s, s]) for s in var]
-    k2, _, p2 = K._trend(m[:, None] * d, covs2, a * d, list(v))
+    k2, _, p2 = T.speed_trend(m[:, None] * d, covs2, a * d, list(v))
     assert (k2, p2) == pytest.approx((k, p), rel=1e-9)
     # a trial whose variance is infinite has no weight: the other three decide
     covs4 = covs[:3] + [np.array([[math.inf]])]
-    k4, _, _ = K._trend(np.append(m[:3], 99.0)[:, None], covs4, np.array([a]), list(v))
-    k3, _, _ = K._trend(m[:3, None], covs[:3], np.array([a]), list(v[:3]))
+    k4, _, _ = T.speed_trend(np.append(m[:3], 99.0)[:, None], covs4, np.array([a]), list(v))
+    k3, _, _ = T.speed_trend(m[:3, None], covs[:3], np.array([a]), list(v[:3]))
     assert k4 == pytest.approx(k3, rel=1e-9)
 
 
 def test_no_trend_is_formed_without_a_size_or_a_speed_range():
     covs = [np.eye(1)] * 3
-    assert K._trend(np.zeros((3, 1)), covs, np.zeros(1), [1.0, 2.0, 3.0]) == (0.0, math.inf, 1.0)
-    assert K._trend(np.ones((3, 1)), covs, np.ones(1), [2.0, 2.0, 2.0]) == (0.0, math.inf, 1.0)
+    assert T.speed_trend(np.zeros((3, 1)), covs, np.zeros(1), [1.0, 2.0, 3.0]) == T.NO_TREND
+    assert T.speed_trend(np.ones((3, 1)), covs, np.ones(1), [2.0, 2.0, 2.0]) == T.NO_TREND
 
 
 @pytest.mark.parametrize("p, k, expected", [(1e-4, 1.2, True), (1e-4, -1.2, True),
@@ -74,7 +81,7 @@ def _consistency(effects: dict, cid: str, seed: int = 13) -> K.Consistency:
     base = WheelParams()
     eff = (C.BY_ID[cid],)
     fit = Problem(trials, base, eff, fixed={"tau_f": coastdown_friction(trials, base).tau_f}).fit()
-    return K.trial_consistency(trials, base, eff, fit, eff[0])
+    return TR.trial_consistency(trials, base, eff, fit, eff[0])
 
 
 @pytest.mark.parametrize("effects, cid", [(COM, "com_offset"), (ECCENTRIC, "angle_eccentricity")])
@@ -120,7 +127,7 @@ def test_the_drift_within_trials_is_the_weighted_mean_of_each_trials_log_ratio()
     g = whole * np.log(hv[:, 1] / hv[:, 0])
     hj = (halves[:, 1] - halves[:, 0]) / g
     w = g ** 2 / var.sum(axis=1)
-    h, sd, p = K._drift(halves, var, hv, whole)
+    h, sd, p = T.hv_drift(halves, var, hv, whole)
     assert h == pytest.approx(np.sum(w * hj) / np.sum(w), rel=1e-12)
     assert sd == pytest.approx(1 / math.sqrt(np.sum(w)), rel=1e-12)
     assert p == pytest.approx(2 * stats.norm.sf(abs(h) / sd), rel=1e-9)
@@ -129,9 +136,9 @@ def test_the_drift_within_trials_is_the_weighted_mean_of_each_trials_log_ratio()
     halves2 = np.vstack([halves, [[np.nan, np.nan], [3.0, 9.0], [1.0, 5.0]]])
     var2 = np.vstack([var, [[np.inf, np.inf], [0.01, 0.01], [np.inf, 0.01]]])
     hv2 = np.vstack([hv, [[np.nan, np.nan], [0.3, 0.9], [0.3, 0.9]]])
-    assert K._drift(halves2, var2, hv2, np.append(whole, [1.0, -1.0, 1.0])) == \
+    assert T.hv_drift(halves2, var2, hv2, np.append(whole, [1.0, -1.0, 1.0])) == \
         pytest.approx((h, sd, p), rel=1e-12)
-    assert K._drift(halves[:, :], var, hv, -whole) == (0.0, math.inf, 1.0)
+    assert T.hv_drift(halves[:, :], var, hv, -whole) == (0.0, math.inf, 1.0)
 
 
 @pytest.mark.parametrize("p, h, expected", [(1e-4, 0.09, True), (1e-4, -0.09, True),
@@ -141,8 +148,8 @@ def test_a_drift_within_the_trials_is_a_caution_not_a_refusal(p, h, expected):
                       np.zeros(1), 0.0, 2, 1.0, [1.0], 0.0, 0.1, 1.0, drift=h, drift_sd=0.01,
                       drift_p=p)
     assert K.drifts(c) is expected
-    assert (K.drift_caution(C.BY_ID["rise_lag"], c) is not None) is expected
-    assert not K.inconsistent(c) and K.stand_in_reason(C.BY_ID["rise_lag"], c) is None
+    assert (CA.drift_caution(C.BY_ID["rise_lag"], c) is not None) is expected
+    assert not K.inconsistent(c) and SI.stand_in_reason(C.BY_ID["rise_lag"], c) is None
 
 
 @pytest.mark.parametrize("trend_p, k, leans, refused", [
@@ -156,27 +163,27 @@ def test_a_lean_on_the_speed_short_of_refusal_is_a_caution(trend_p, k, leans, re
                       [3.1, 2.6, 2.1], k, 0.5, trend_p)
     cand = C.BY_ID["charge_retention"]
     assert K.leans(c) is leans and K.inconsistent(c) is refused
-    assert (K.stand_in_reason(cand, c) is not None) is refused
-    why = K.caution(cand, c)
+    assert (SI.stand_in_reason(cand, c) is not None) is refused
+    why = CA.caution(cand, c)
     assert (why is not None) is leans
     if leans:
         assert why.startswith("charge_retention goes with the speed, refitted trial by trial")
         assert f"k = {k:+.2f}" in why and "may stand in for an effect whose size goes" in why
         assert "builds up after each switch-on" not in why
         # tested beside the switch-on lag and kept there: the caution says so
-        held = K.Beside(K.ON_LAG, 0.002, {"rate": 0.07}, 1e-9, (0.027, 0.031), 0.1)
+        held = MD.Beside(MD.ON_LAG, 0.002, {"rate": 0.07}, 1e-9, (0.027, 0.031), 0.1)
         assert held.holds()
         # (with min_gain 0.3 the same 12.9 % cut would not do: the caution says so)
-        lost = K.caution(cand, dataclasses.replace(
+        lost = CA.caution(cand, dataclasses.replace(
             c, beside_lag=dataclasses.replace(held, min_gain=0.3)))
         assert "12.9 %): there it no longer holds." in lost
-        why = K.caution(cand, dataclasses.replace(c, beside_lag=held))
+        why = CA.caution(cand, dataclasses.replace(c, beside_lag=held))
         assert ("; refitted beside a force that builds up after each switch-on (time "
                 "constant 2 ms, a measuring device; Wald p of charge_retention 1.0e-09, the "
                 "free run on all trials 0.0270 rad/s against 0.0310 without it, a cut of "
                 "12.9 %): there it still holds.") in why
     # with a drift as well, both sentences, the lean first
-    both = K.caution(cand, dataclasses.replace(c, drift=0.09, drift_sd=0.01, drift_p=1e-4))
+    both = CA.caution(cand, dataclasses.replace(c, drift=0.09, drift_sd=0.01, drift_p=1e-4))
     assert ("goes with the speed" in both) is leans and "not the same throughout" in both
     if leans:
         assert 0 < both.index("goes with the speed") < both.index("not the same throughout")
@@ -190,7 +197,7 @@ def test_a_lean_on_the_speed_short_of_refusal_is_a_caution(trend_p, k, leans, re
     (1e-7, (0.0310, 0.0300), False)])      # the free run is worse with it
 def test_an_effect_holds_beside_a_device_when_significant_and_still_cutting_the_error(p, sim,
                                                                                       holds):
-    b = K.Beside(K.HV_LOSS, 0.2, {"c": 1e-3}, p, sim, 0.1)
+    b = MD.Beside(MD.HV_LOSS, 0.2, {"c": 1e-3}, p, sim, 0.1)
     assert b.holds() is holds
     text = b.text("viscous_drag", need=True)
     cut = 100 * abs(1 - sim[0] / sim[1])
@@ -226,12 +233,12 @@ def _devices(model: float, **errors: float) -> dict[str, dict]:
     (_devices(0.0500, hv_loss=math.nan, on_lag=0.0400), "of these, a force that builds up")])
 def test_the_device_that_takes_up_the_most_of_a_drift_must_cut_it_and_beat_the_other(
         devices, verdict):
-    said = K.devices_verdict(devices, min_gain=0.1)
+    said = DV.devices_verdict(devices, min_gain=0.1)
     assert said.startswith(verdict)
-    lead = K.lead_device(devices, min_gain=0.1)
+    lead = DV.lead_device(devices, min_gain=0.1)
     assert (lead is not None) is said.startswith("of these")
     if lead is not None:
-        assert said.startswith(f"of these, {K.DEVICE_WORDS[lead][0]} takes up the most")
+        assert said.startswith(f"of these, {MD.DEVICE_WORDS[lead][0]} takes up the most")
 
 
 def _together(devices: dict[str, dict], **ps: float) -> dict[str, dict]:
@@ -252,14 +259,14 @@ def _together(devices: dict[str, dict], **ps: float) -> dict[str, dict]:
     ({"hv_loss": math.nan, "on_lag": 1.0}, None, "on_lag")])
 def test_the_device_alone_significant_beside_the_other_takes_up_the_most(ps, together, lead):
     devices = _together(_devices(0.0327, hv_loss=0.0270, on_lag=0.0245), **ps)
-    assert K.together_lead(devices) == together
-    assert K.lead_device(devices, min_gain=0.1) == lead
-    said = K.devices_verdict(devices, min_gain=0.1)
-    assert said.startswith(f"of these, {K.DEVICE_WORDS[lead][0]} takes up the most of it")
+    assert DV.together_lead(devices) == together
+    assert DV.lead_device(devices, min_gain=0.1) == lead
+    said = DV.devices_verdict(devices, min_gain=0.1)
+    assert said.startswith(f"of these, {MD.DEVICE_WORDS[lead][0]} takes up the most of it")
     if together is not None:
         other = next(k for k in ps if k != lead)
         assert (f"refitted together, only it stays significant (Wald p {ps[lead]:.1e}; "
-                f"{K.DEVICE_WORDS[other][0]} {ps[other]:.1e})") in said
+                f"{MD.DEVICE_WORDS[other][0]} {ps[other]:.1e})") in said
     else:
         assert "refitted together" not in said
 
@@ -269,16 +276,16 @@ def test_the_device_alone_significant_together_must_still_cut_the_free_run():
     # and the free runs (the lag 20 % below) do not overrule that
     devices = _together(_devices(0.0327, hv_loss=0.0320, on_lag=0.0260),
                         hv_loss=1e-20, on_lag=0.9)
-    assert K.together_lead(devices) == "hv_loss" and K.lead_device(devices, 0.1) is None
-    assert K.devices_verdict(devices, 0.1).startswith("no device takes up clearly more")
+    assert DV.together_lead(devices) == "hv_loss" and DV.lead_device(devices, 0.1) is None
+    assert DV.devices_verdict(devices, 0.1).startswith("no device takes up clearly more")
 
 
 def test_what_a_device_must_cut_is_half_of_min_gain():
     # the lag cuts the free run by 8 % and beats the HV-time loss by 8 %: enough for half
     # of 0.1, not for half of 0.2
     devices = _devices(0.0500, hv_loss=0.0500, on_lag=0.0460)
-    assert K.devices_verdict(devices, min_gain=0.1).startswith("of these, a force that builds")
-    assert K.devices_verdict(devices, min_gain=0.2) == (
+    assert DV.devices_verdict(devices, min_gain=0.1).startswith("of these, a force that builds")
+    assert DV.devices_verdict(devices, min_gain=0.2) == (
         "no device takes up much of it (each cuts the free run on all trials by less than 10 %)")
 
 
@@ -290,7 +297,7 @@ def test_only_a_size_that_grows_with_the_speed_is_tested_beside_the_switch_on_la
                       [3.1, 2.6, 2.1], k, 0.5, p)
     assert K.grows_with_speed(c) is grows
     assert not K.grows_with_speed(None)
-    assert not K.can_measure_lag((C.BY_ID["rise_lag"],)) and K.can_measure_lag(
+    assert not MD.can_measure_lag((C.BY_ID["rise_lag"],)) and MD.can_measure_lag(
         (C.BY_ID["charge_retention"],))
 
 
@@ -320,9 +327,9 @@ def _beside(effects: dict, cid: str, seed: int = 11) -> tuple[K.Consistency, str
     eff = (C.BY_ID[cid],)
     # tau_f free from the coast-downs' value, as the search fits it
     fit = Problem(trials, base, eff).fit(start={"tau_f": coastdown_friction(trials, base).tau_f})
-    con = K.trial_consistency(trials, base, eff, fit, eff[0])
+    con = TR.trial_consistency(trials, base, eff, fit, eff[0])
     assert K.drifts(con)
-    return con, K.drift_stand_in(trials, base, eff, fit, eff[0], con, min_gain=0.1)
+    return con, SI.drift_stand_in(trials, base, eff, fit, eff[0], con, min_gain=0.1)
 
 
 def test_a_drifting_stand_in_loses_its_hold_beside_the_measured_loss():
@@ -350,7 +357,7 @@ def test_a_right_effect_that_drifts_beside_a_missing_loss_keeps_its_hold():
     assert con.beside.p < 1e-20
     e1, e0 = con.beside.sim
     assert 1.0 - e1 / e0 >= 0.05
-    assert "it still holds" in K.drift_caution(C.BY_ID["viscous_drag"], con)
+    assert "it still holds" in CA.drift_caution(C.BY_ID["viscous_drag"], con)
     # and report.json carries the refit beside the device
     beside = report.consistency_json(C.BY_ID["viscous_drag"], con)["beside_hv_loss"]
     assert beside == {"rate_per_s": con.beside.value, "values": {"c": con.beside.values["c"]},
@@ -363,14 +370,14 @@ def test_a_right_effect_that_drifts_beside_a_missing_loss_keeps_its_hold():
 def _beside_lag(effects: dict, seed: int) -> tuple[K.Consistency, str | None]:
     """Charge retention alone fitted to plant data with ``effects``, checked trial by trial
     and, since it grows with the speed, refitted beside a force that builds up after each
-    switch-on (:data:`~.consistency.ON_LAG`)."""
+    switch-on (:data:`~.measuring_devices.ON_LAG`)."""
     trials = S.encoder_trials(effects, seed)
     base = WheelParams()
     eff = (C.BY_ID["charge_retention"],)
     fit = Problem(trials, base, eff).fit(start={"tau_f": coastdown_friction(trials, base).tau_f})
-    con = K.trial_consistency(trials, base, eff, fit, eff[0])
+    con = TR.trial_consistency(trials, base, eff, fit, eff[0])
     assert K.grows_with_speed(con) and not K.inconsistent(con)
-    return con, K.lag_stand_in(trials, base, eff, fit, eff[0], con, min_gain=0.1)
+    return con, SI.lag_stand_in(trials, base, eff, fit, eff[0], con, min_gain=0.1)
 
 
 def test_retention_standing_in_for_a_rise_lag_loses_its_hold_beside_the_lag():
@@ -379,7 +386,7 @@ def test_retention_standing_in_for_a_rise_lag_loses_its_hold_beside_the_lag():
     # device takes the plant's time constant and retention is no longer needed
     con, why = _beside_lag(RISE, seed=11)
     b = con.beside_lag
-    assert b.device is K.ON_LAG and b.value == pytest.approx(0.04, rel=0.1)
+    assert b.device is MD.ON_LAG and b.value == pytest.approx(0.04, rel=0.1)
     assert b.p > 1e-3 and not b.holds()
     e1, e0 = b.sim
     assert e1 > 0.95 * e0
@@ -408,14 +415,14 @@ def test_a_right_retention_that_grows_with_the_speed_keeps_its_hold_beside_the_l
 def _lag_beside_loss(effects: dict, seed: int) -> tuple[K.Consistency, str | None]:
     """A rise lag alone fitted to plant data with ``effects`` (3 x 34 s): it does not drift
     within the trials, and is refitted beside the HV-time loss all the same
-    (:data:`~.consistency.LOSS_LOOKALIKES`)."""
+    (:data:`~.stand_ins.LOSS_LOOKALIKES`)."""
     trials = S.encoder_trials(effects, seed)
     base = WheelParams()
     eff = (C.BY_ID["rise_lag"],)
     fit = Problem(trials, base, eff).fit(start={"tau_f": coastdown_friction(trials, base).tau_f})
-    con = K.trial_consistency(trials, base, eff, fit, eff[0])
+    con = TR.trial_consistency(trials, base, eff, fit, eff[0])
     assert not K.drifts(con) and not K.inconsistent(con)
-    return con, K.drift_stand_in(trials, base, eff, fit, eff[0], con, min_gain=0.1)
+    return con, SI.drift_stand_in(trials, base, eff, fit, eff[0], con, min_gain=0.1)
 
 
 def test_a_rise_lag_standing_in_for_weak_retention_is_refused_beside_the_loss():
@@ -427,7 +434,7 @@ def test_a_rise_lag_standing_in_for_weak_retention_is_refused_beside_the_loss():
                                  "recovery": {"value": 300.0, "unit": "s"}}}
     con, why = _lag_beside_loss(weak, seed=12)
     b = con.beside
-    assert b.device is K.HV_LOSS and b.value == pytest.approx(0.05, rel=0.15)
+    assert b.device is MD.HV_LOSS and b.value == pytest.approx(0.05, rel=0.15)
     assert b.device_p < 1e-6 < b.p and not b.holds()
     assert why.code == Reason.HV_LOSS_LOOKALIKE and why.values["device_p"] == b.device_p
 
@@ -444,8 +451,8 @@ def test_a_right_rise_lag_is_kept_beside_the_loss(tau, seed, holds):
     b = con.beside
     assert why is None and b.holds() is holds
     assert b.values["tau"] == pytest.approx(tau, rel=0.1) and b.p < 1e-6
-    assert b.device_p > K.LOOKALIKE_P and b.value < 0.02
-    assert K.loss_caution(C.BY_ID["rise_lag"], con) is None
+    assert b.device_p > MD.LOOKALIKE_P and b.value < 0.02
+    assert CA.loss_caution(C.BY_ID["rise_lag"], con) is None
 
 
 def test_a_rise_lag_that_holds_beside_a_significant_loss_carries_a_caution():
@@ -456,9 +463,9 @@ def test_a_rise_lag_that_holds_beside_a_significant_loss_carries_a_caution():
                       np.full((3, 1), 0.003), np.full(1, 0.027), 3.8, 2, 0.15,
                       [3.2, 2.7, 2.2], 0.2, 0.56, 0.72)
     lag = C.BY_ID["rise_lag"]
-    b = K.Beside(K.HV_LOSS, 0.0369, {"tau": 0.0197}, 2.2e-8, (0.0260, 0.0274), 0.1, 1.8e-3)
+    b = MD.Beside(MD.HV_LOSS, 0.0369, {"tau": 0.0197}, 2.2e-8, (0.0260, 0.0274), 0.1, 1.8e-3)
     assert b.holds() and not K.drifts(c)
-    why = K.caution(lag, dataclasses.replace(c, beside=b))
+    why = CA.caution(lag, dataclasses.replace(c, beside=b))
     assert why.startswith("rise_lag refitted beside a force loss that grows with the "
                           "accumulated HV time (rate 0.0369/s, a measuring device, itself at "
                           "Wald p 1.8e-03;")
@@ -468,8 +475,8 @@ def test_a_rise_lag_that_holds_beside_a_significant_loss_carries_a_caution():
     # none when the loss is not significant, the lag does not hold, or it is not a rise lag
     for other in (dataclasses.replace(b, device_p=0.2),
                   dataclasses.replace(b, sim=(0.0272, 0.0274))):
-        assert K.loss_caution(lag, dataclasses.replace(c, beside=other)) is None
-    assert K.loss_caution(C.BY_ID["viscous_drag"], dataclasses.replace(c, beside=b)) is None
+        assert CA.loss_caution(lag, dataclasses.replace(c, beside=other)) is None
+    assert CA.loss_caution(C.BY_ID["viscous_drag"], dataclasses.replace(c, beside=b)) is None
 
 
 def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():
@@ -478,7 +485,7 @@ def test_a_rise_lag_standing_in_for_charge_retention_grows_through_each_drive():
     c = _consistency(RETENTION, "rise_lag", seed=11)
     assert np.all(c.halves[:, 1] > c.halves[:, 0])
     assert c.drift > K.DRIFT and c.drift_p < 1e-6 and K.drifts(c)
-    why = K.drift_caution(C.BY_ID["rise_lag"], c)
+    why = CA.drift_caution(C.BY_ID["rise_lag"], c)
     assert "not the same throughout a trial" in why and "first to the second half" in why
 
 
@@ -505,14 +512,14 @@ def _closed_loop_consistency(trials, cid: str) -> K.Consistency:
     eff = (C.BY_ID[cid],)
     start = {**F.force_coordinates(base), "tau_f": base.tau_f, "brake_gain": base.brake_gain}
     fit = Problem(trials, base, eff).fit(start=start, max_nfev=20)
-    return K.trial_consistency(trials, base, eff, fit, eff[0])
+    return TR.trial_consistency(trials, base, eff, fit, eff[0])
 
 
 @ON_LOOP_WORKER
 def test_spans_are_cut_between_pushes_only_when_the_trials_share_their_speed(closed_loop_com):
-    speeds = [K.driven_speed(tr) for tr in closed_loop_com]
+    speeds = [DC.driven_speed(tr) for tr in closed_loop_com]
     assert max(speeds) < 1.05 * min(speeds)
-    units = K.speed_units(closed_loop_com)
+    units = DC.speed_units(closed_loop_com)
     # 45 s at 1.0-2.2 rad/s is about 11 turns: three spans of at least three turns each
     assert [j for j, _ in units] == [0] * 3 + [1] * 3
     for j, tr in enumerate(closed_loop_com):
@@ -523,10 +530,10 @@ def test_spans_are_cut_between_pushes_only_when_the_trials_share_their_speed(clo
         assert [a + p.t.size for a, p in zip(starts, pieces)][:-1] == starts[1:]
         assert sum(p.t.size for p in pieces) == int(np.flatnonzero(tr.q | (tr.n_a >= 0))[-1]
                                                     - np.flatnonzero(tr.q | (tr.n_a >= 0))[0] + 1)
-        v = [K.driven_speed(p) for p in pieces]
+        v = [DC.driven_speed(p) for p in pieces]
         assert v[0] < 1.2 < 2.0 < v[-1]                  # the references step 1.0 -> 2.2 rad/s
     # open-loop trials at three schedules differ in speed: they are their own units
-    assert K.speed_units(S.encoder_trials({}, 3)) == []
+    assert DC.speed_units(S.encoder_trials({}, 3)) == []
 
 
 @ON_LOOP_WORKER
@@ -539,7 +546,7 @@ def test_a_reading_error_standing_in_for_an_off_centre_mass_falls_with_speed_spa
     stand_in = _closed_loop_consistency(closed_loop_com, "angle_eccentricity")
     assert stand_in.unit == "span" and K.inconsistent(stand_in)
     assert stand_in.exponent < -0.5 and stand_in.trend_p < 1e-6
-    why = K.stand_in_reason(C.BY_ID["angle_eccentricity"], stand_in)
+    why = SI.stand_in_reason(C.BY_ID["angle_eccentricity"], stand_in)
     assert why.code == Reason.SPEED_STAND_IN and why.values["unit"] == "span"
 
 
@@ -571,9 +578,9 @@ def test_a_trial_that_stalls_for_good_is_halved_as_the_fit_sees_it():
     base = WheelParams()
     eff = (C.BY_ID["rise_lag"],)
     fit = Problem(trials, base, eff).fit(start={"tau_f": coastdown_friction(trials, base).tau_f})
-    c = K.trial_consistency(trials, base, eff, fit, eff[0])
+    c = TR.trial_consistency(trials, base, eff, fit, eff[0])
     assert np.all(np.isfinite(c.halves))
-    moving = K.driven_speed(F.at_rest_trimmed(trials[1]))
+    moving = DC.driven_speed(F.at_rest_trimmed(trials[1]))
     assert c.speeds[1] == pytest.approx(moving) and moving > 1.0
     assert not K.drifts(c)
 

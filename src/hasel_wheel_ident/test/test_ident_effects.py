@@ -17,7 +17,7 @@ from hasel_wheel_ident import evaluation as EV
 from hasel_wheel_ident import refit_plan as PLAN
 from hasel_wheel_ident import select as SEL
 from hasel_wheel_ident import unexplained as UNX
-from hasel_wheel_ident import consistency as K
+from hasel_wheel_ident import device_verdict as K
 from hasel_wheel_ident.identification import Identification
 from hasel_wheel_ident import synthetic as S
 from hasel_wheel_ident.fit import Problem, force_coordinates, from_force_coordinates
