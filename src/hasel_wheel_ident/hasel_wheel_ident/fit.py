@@ -2,8 +2,8 @@
 candidate effects) by multiple-shooting least squares, with uncertainty.
 
 Parameterisation.  F_a depends on sigma6 / (sigma2 |xi2| + sigma3), so only two ratios of
-(sigma2, sigma3, sigma6) are determined by data (model-notes.md).  There is a second
-degeneracy the notes do not list: with u = ln(contact angle), the bump's exponent
+(sigma2, sigma3, sigma6) are determined by data (docs/identification.md).  There is a
+second degeneracy: with u = ln(contact angle), the bump's exponent
 -sigma1 u - (u - sigma4)^2 / sigma5^2 plus ln(sigma6) is a quadratic in u, which has three
 coefficients, while (sigma1, sigma4, sigma5, sigma6) are four.  So sigma1 cannot be told from a
 shift of sigma4 with a rescaling of sigma6.  The fit therefore uses the coordinates that the
@@ -13,48 +13,49 @@ data does determine (:func:`force_coordinates`):
     (+ brake_gain when the data holds braking activations, + each candidate's parameters)
 
 and maps back with sigma1 and sigma3 held at their reference values.
-:func:`~.identify.identifiability` shows, from the data's own Jacobian in the paper's
+:func:`~.identifiability.identifiability` shows, from the data's own Jacobian in the paper's
 parameters, which directions are determined and which are not.
 
 Objective.  Each trial is cut into windows of ``window`` seconds; each window starts from its
 own (xi1, xi2), fitted along with the parameters (multiple shooting).  The residual is the
 simulated angle as the model's sensor reads it (:func:`~hasel_wheel_sim.model.angle_readings`;
 the angle itself unless an eccentricity is fitted) minus the recorded angle [rad] at every
-sample, with the measured switching (:func:`~.simulate.shoot_windows`).  The window starts are solved for inside every evaluation
-(variable projection: safeguarded Gauss-Newton on each window, in compiled code,
-:func:`~.simulate.solve_window_starts`), so scipy's trust-region least
-squares sees only the shared parameters, with the window starts projected out of its
-Jacobian (Kaufman).  It runs to convergence (:data:`FTOL`), not to an iteration limit.
-The same projected Jacobian gives the covariance with the starts marginalised.
+sample, with the measured switching (:func:`~.simulate.shoot_windows`).  The window starts
+are solved for inside every evaluation (variable projection: safeguarded Gauss-Newton on
+each window, in compiled code, :func:`~.simulate.solve_window_starts`), so scipy's
+trust-region least squares sees only the shared parameters, with the window starts
+projected out of its Jacobian (Kaufman).  It runs to convergence
+(:data:`~.least_squares.FTOL`), not to an iteration limit.  The same projected Jacobian
+gives the covariance with the starts marginalised (:mod:`.uncertainty`).
+
+:class:`Problem` holds the shooting; the trials' layout (:mod:`.shooting_layout`), the
+parameter map (:mod:`.param_map`), the force gains (:mod:`.force_gains`) and the
+least-squares run (:mod:`.least_squares`) are their own modules.  Tested in
+``test_ident_fit.py`` and ``test_ident_window_starts.py``.
 """
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import stats
 
-from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import N_ACTUATORS, angle_readings, param_vector
-from hasel_wheel_sim.params import ParameterError, WheelParams
+from hasel_wheel_sim.params import WheelParams
 
 from hasel_wheel_ident.candidates import Candidate, ParamSpec
 from hasel_wheel_ident.data import REST_BAND, Trial, clean_mask, rest_start
-from hasel_wheel_ident.simulate import (project_out_starts, retention_charge, shoot_errors, shoot_quotients,
-                       shoot_windows, solve_window_starts)
+from hasel_wheel_ident.fit_result import FitResult
+from hasel_wheel_ident.force_gains import ForceGains
+from hasel_wheel_ident.least_squares import solve
+from hasel_wheel_ident.param_map import ParameterMap
+from hasel_wheel_ident.shooting_layout import initial_starts, lay_out
+from hasel_wheel_ident.simulate import (project_out_starts, shoot_errors, shoot_quotients,
+                                        shoot_windows, solve_window_starts)
 from hasel_wheel_ident.threads import run_split, with_one_blas_thread
-
-
-#: A step that lowers the cost by less than this fraction of it ends the fit (scipy's
-#: ``ftol``).  The cost divided by the noise variance is about the number of samples outside
-#: their encoder interval, ~11,000 on 5 x 60 s at 300 Hz (13 % of them), so 1e-6 of it is
-#: ~0.01 of one unit of chi^2: far inside any interval (95 % spans 3.84 units).  It is also
-#: about the precision of the cost itself: the window starts are solved to ~1e-7 rad, and
-#: solving them with 60 Gauss-Newton iterations instead of 12 moves the cost by a few 1e-6
-#: of itself, so a tighter tolerance only chases that noise.
-FTOL = 1e-6
+from hasel_wheel_ident.uncertainty import noise
 
 
 def force_coordinates(p: WheelParams) -> dict[str, float]:
@@ -146,32 +147,6 @@ def coastdown_friction(trials: list[Trial], base: WheelParams) -> FrictionEstima
 
 
 # -- the multiple-shooting problem ---------------------------------------------------------------
-@dataclass
-class FitResult:
-    """Outcome of one fit; ``values`` and ``ci95`` are keyed by parameter name."""
-
-    names: list[str]
-    units: list[str]
-    theta: np.ndarray                 # shared parameters (g,)
-    z: np.ndarray                     # everything fitted, shared then window starts
-    cov: np.ndarray                   # (g, g) covariance of theta (nuisance marginalised)
-    rmse: float                       # angle residual RMS [rad] over all used samples
-    per_trial_rmse: dict[str, float]
-    nfev: int
-    converged: bool
-    message: str
-    inflation: float                  # variance inflation for residual autocorrelation
-    candidates: tuple[str, ...] = ()
-    params: WheelParams | None = None
-    values: dict[str, float] = field(default_factory=dict)
-    ci95: dict[str, tuple[float, float]] = field(default_factory=dict)
-
-    @property
-    def x0(self) -> np.ndarray:
-        """(w, 2) the fitted start of each window: xi1 [rad], xi2 [rad/s]."""
-        return self.z[self.theta.size:].reshape(-1, 2)
-
-
 class Problem:
     """Multiple-shooting least squares over a set of trials (see the module docstring).
 
@@ -179,8 +154,9 @@ class Problem:
     (e.g. tau_f from the coast-downs).  ``keep`` (t0, t1) [s], in each trial's own clock,
     counts only the samples with t0 <= t < t1 in the residual: the rest are still simulated,
     so that states such as the retained charge run on from the trial's start, but carry no
-    weight (a window without a counted sample has undetermined starts, which stay put).  Arrays of all trials are concatenated; windows never
-    cross a trial boundary.  ``threads`` > 1 splits every simulation's windows over that many
+    weight (a window without a counted sample has undetermined starts, which stay put).
+    Arrays of all trials are concatenated (:mod:`.shooting_layout`); windows never cross a
+    trial boundary.  ``threads`` > 1 splits every simulation's windows over that many
     threads (the same numbers bit for bit).  An instance is not thread-safe: its simulations
     share output arrays, so give each thread its own.
     """
@@ -195,73 +171,24 @@ class Problem:
         self.base = base or WheelParams()
         self.candidates = tuple(candidates)
         brake = any(a.phi_a < 0 for tr in trials for a in tr.activations)
-        self.n_nominal = len(nominal_specs(self.base, brake))
-        self.specs = nominal_specs(self.base, brake) + tuple(p for c in candidates for p in c.params)
-        self.fixed = dict(fixed or {})
-        self.free = [i for i, p in enumerate(self.specs) if p.name not in self.fixed]
+        specs = nominal_specs(self.base, brake) + tuple(p for c in candidates for p in c.params)
+        self.params = ParameterMap(specs, len(nominal_specs(self.base, brake)), fixed)
+        self.specs, self.n_nominal = self.params.specs, self.params.n_nominal
+        self.fixed, self.free = self.params.fixed, self.params.free
         self.window = window
         self.quantised = quantised
         self.threads = max(int(threads), 1)
         self.keep = keep
-        self._concat()
-
-    # -- layout -------------------------------------------------------------------------------
-    def _concat(self) -> None:
-        ts, ys, qs, es, pas, ots, oks, starts, owner = [], [], [], [], [], [], [], [], []
-        n = 0
-        self.trial_slices: list[slice] = []
-        self.trial_windows: list[range] = []
-        for j, tr in enumerate(self.trials):
-            m = tr.t.shape[0]
-            # each activation's own angle (:func:`~.data.find_activations`), not the row's:
-            # a host logs its schedule when it sends it, the wheel's state when it arrives,
-            # so with a link delay the rows at an activation's end can already carry the
-            # next command's angle (a braking force from it would bend the whole trial's
-            # fit), and the rows after the schedule is cleared have none
-            on_time = np.zeros(m)
-            phi_a = np.zeros(m)
-            for act in tr.activations:
-                on_time[act.start:act.stop] = tr.t[act.start:act.stop] - tr.t[act.start]
-                phi_a[act.start:act.stop] = act.phi_a
-            ts.append(tr.t)
-            ys.append(tr.angle)
-            qs.append(tr.q.astype(float))
-            es.append(tr.eta_unwrapped.astype(float))
-            pas.append(phi_a)
-            ots.append(on_time)
-            ok = clean_mask(tr.t, tr.angle)
-            if self.keep is not None:
-                ok &= (tr.t >= self.keep[0]) & (tr.t < self.keep[1])
-            oks.append(ok)
-            w0 = len(starts)
-            k = 0
-            while k < m - 1:
-                kk = int(np.searchsorted(tr.t, tr.t[k] + self.window))
-                if m - kk < 0.5 * self.window / tr.sample_time:   # a short tail joins
-                    kk = m
-                starts.append(n + k)
-                owner.append(j)
-                k = kk
-            self.trial_windows.append(range(w0, len(starts)))
-            self.trial_slices.append(slice(n, n + m))
-            n += m
-        self.t = np.concatenate(ts)
-        self.y = np.concatenate(ys)
-        self.q = np.concatenate(qs)
-        self.eta = np.concatenate(es)
-        self.phi_a = np.concatenate(pas)
-        self.on_time = np.concatenate(ots)
-        self.ok = np.concatenate(oks)
+        lay = self.layout = lay_out(self.trials, window, keep)
+        self.t, self.y, self.q, self.eta, self.phi_a = lay.t, lay.y, lay.q, lay.eta, lay.phi_a
+        self.on_time, self.ok, self.pad, self.n = lay.on_time, lay.ok, lay.pad, lay.n
+        self.starts, self.window_trial = lay.starts, lay.window_trial
+        self.trial_slices, self.trial_windows = lay.trial_slices, lay.trial_windows
         self.quantum = encoder_quantum(self.y) if self.quantised else None
-        self.pad = (np.concatenate(es).astype(np.int64) % N_ACTUATORS)
-        self.starts = np.asarray(starts + [n], dtype=np.int64)
-        self.window_trial = np.asarray(owner)
-        self.n = n
-        self._out1 = np.zeros(n)
-        self._out2 = np.zeros(n)
+        self._out1 = np.zeros(self.n)
+        self._out2 = np.zeros(self.n)
         self._every = np.arange(self.n_windows)
-        self._charge_cache: dict[float, np.ndarray] = {}
-        self._gains_cache: tuple[bytes, np.ndarray] | None = None
+        self._gains = ForceGains(self.layout)
 
     @property
     def n_windows(self) -> int:
@@ -269,25 +196,18 @@ class Problem:
 
     @property
     def names(self) -> list[str]:
-        return [self.specs[i].name for i in self.free]
+        return self.params.names
 
     # -- parameters -> model ------------------------------------------------------------------
     def at_bounds(self, fit: FitResult, rel: float = 1e-6) -> list[str]:
         """The nominal parameters of ``fit`` (a fit of this problem) that ended on a bound of
         their range (within ``rel`` of the range's width)."""
-        out = []
-        for i in self.free:
-            p = self.specs[i]
-            if i < self.n_nominal and p.name in fit.values:
-                v, tol = fit.values[p.name], rel * (p.upper - p.lower)
-                if v <= p.lower + tol or v >= p.upper - tol:
-                    out.append(p.name)
-        return out
+        return self.params.at_bounds(fit.values, rel)
 
     def full_theta(self, theta_free: np.ndarray) -> np.ndarray:
-        full = np.array([self.fixed.get(p.name, p.start) for p in self.specs], dtype=float)
-        full[self.free] = theta_free
-        return full
+        """All shared parameters, the free ones ``theta_free``
+        (:meth:`~.param_map.ParameterMap.full_theta`)."""
+        return self.params.full_theta(theta_free)
 
     def wheel_params(self, full: np.ndarray) -> WheelParams:
         other = {"tau_f": full[4]}
@@ -307,32 +227,8 @@ class Problem:
 
     def gains(self, pv: np.ndarray) -> np.ndarray:
         """Force multiplier of the active actuator at every sample (spread x retention), (n,),
-        read-only.  The last one is kept: most evaluations change no gain."""
-        key = pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS].tobytes() + pv[
-            [L.P_RET_RATE, L.P_RET_RECOVERY]].tobytes()
-        last = self._gains_cache
-        if last is not None and last[0] == key:
-            return last[1]
-        g = self._gains(pv)
-        g.flags.writeable = False
-        self._gains_cache = (key, g)
-        return g
-
-    def _gains(self, pv: np.ndarray) -> np.ndarray:
-        g = pv[L.P_GAINS + self.pad]
-        rate = pv[L.P_RET_RATE]
-        if rate > 0.0:
-            rec = float(pv[L.P_RET_RECOVERY])
-            charge = self._charge_cache.get(rec)
-            if charge is None:
-                charge = np.concatenate([retention_charge(self.t[s], self.q[s].astype(np.int64),
-                                                          self.pad[s], rec)
-                                         for s in self.trial_slices])
-                if len(self._charge_cache) > 64:
-                    self._charge_cache.clear()
-                self._charge_cache[rec] = charge
-            g = g * np.exp(-rate * charge)
-        return g
+        read-only (:class:`~.force_gains.ForceGains`)."""
+        return self._gains(pv)
 
     # -- simulation and residual ----------------------------------------------------------------
     def simulate(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -357,29 +253,14 @@ class Problem:
         return angle_readings(x1, self.model(self.full_theta(z[:len(self.free)]))[0])
 
     def noise(self, r: np.ndarray, g: int) -> tuple[float, float]:
-        """(s^2 [rad^2], inflation) of the residual r (n,) of a fit with g shared parameters.
-
-        With encoder intervals only the samples outside their interval carry error (the rest
-        are 0 and say only "inside"), so the variance is over those, and their
-        autocorrelation is taken about zero (the zeros are not noise about a mean)."""
-        active = self.ok & (r != 0.0) if self.quantum is not None else self.ok
-        # a window with no counted sample (outside ``keep``) fits no start
-        weighed = int(np.count_nonzero(np.add.reduceat(self.ok, self.starts[:-1])))
-        dof = max(int(active.sum()) - g - 2 * weighed, 1)
-        return (float(r @ r) / dof,
-                autocorrelation_inflation(r, self.starts, active,
-                                          centred=self.quantum is None))
+        """(s^2 [rad^2], inflation) of the residual r (n,) of a fit with g shared parameters
+        (:func:`~.uncertainty.noise`)."""
+        return noise(r, g, self.ok, self.starts, self.quantum is not None)
 
     def initial_starts(self) -> np.ndarray:
-        """(w, 2) window starts from a line through the first 0.1 s of each window."""
-        x0 = np.zeros((self.n_windows, 2))
-        for w in range(self.n_windows):
-            a, e = self.starts[w], self.starts[w + 1]
-            b = max(min(a + int(np.searchsorted(self.t[a:e], self.t[a] + 0.1)), e), a + 2)
-            ok = self.ok[a:b] if self.ok[a:b].sum() >= 2 else np.ones(b - a, dtype=bool)
-            p = np.polyfit(self.t[a:b][ok] - self.t[a], self.y[a:b][ok], 1)
-            x0[w] = (p[1], max(p[0], 0.0))
-        return x0
+        """(w, 2) window starts from a line through the first 0.1 s of each window
+        (:func:`~.shooting_layout.initial_starts`)."""
+        return initial_starts(self.layout)
 
     def _shoot(self, pv: np.ndarray, eta: np.ndarray, gains: np.ndarray,
                x0: np.ndarray) -> np.ndarray:
@@ -501,81 +382,9 @@ class Problem:
     @with_one_blas_thread
     def fit(self, start: dict[str, float] | None = None, x0: np.ndarray | None = None,
             max_nfev: int = 100) -> FitResult:
-        """Least squares to convergence (variable projection: the window starts are solved
-        for inside every evaluation).  ``start`` overrides start values by name, ``x0`` gives
-        window starts (w, 2)."""
-        start = start or {}
-        th = np.array([start.get(self.specs[i].name, self.specs[i].start) for i in self.free])
-        lo = np.array([self.specs[i].lower for i in self.free])
-        hi = np.array([self.specs[i].upper for i in self.free])
-        th = np.clip(th, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
-        scale = np.array([self.specs[i].scale for i in self.free])
-        # window starts are warm-started from those of the best evaluation so far, so a trial
-        # step far off (which the trust region then rejects) cannot spoil later evaluations
-        state = {"x0": self.initial_starts() if x0 is None else x0.copy(), "key": None,
-                 "best": math.inf}
-        best = {"x0": state["x0"]}
-
-        def evaluate(theta):
-            key = theta.tobytes()
-            if state["key"] != key:
-                try:
-                    x, r, d1, d2 = self.solve_starts(self.full_theta(theta), best["x0"])
-                except ParameterError:
-                    # a trial step outside the physical parameter ranges (a force law with
-                    # sigma6 beyond its bound): an error far above any fit, so the trust
-                    # region rejects the step and shrinks
-                    x, r = best["x0"], np.where(self.ok, 1.0, 0.0)
-                    d1 = d2 = np.zeros(self.n)
-                state.update(key=key, x0=x, r=r, d1=d1, d2=d2)
-                cost = float(r @ r)
-                if cost < state["best"]:
-                    state["best"] = cost
-                    best["x0"] = x
-            return state
-
-        def fun(theta):
-            return evaluate(theta)["r"].copy()
-
-        def jac(theta):
-            st = evaluate(theta)
-            return self.jacobian(theta, st["x0"], st["r"], st["d1"], st["d2"])
-
-        if th.size:
-            sol = optimize.least_squares(fun, th, jac=jac, bounds=(lo, hi), x_scale=scale,
-                                         method="trf", ftol=FTOL, xtol=1e-10, gtol=1e-10,
-                                         max_nfev=max_nfev)
-            theta, nfev, ok, msg = sol.x, sol.nfev, sol.status > 0, sol.message
-            J = jac(theta)
-        else:
-            theta, nfev, ok, msg, J = th, 1, True, "nothing to fit", np.zeros((self.n, 0))
-        st = evaluate(theta)
-        return self._result(theta, st["x0"], st["r"], J, nfev, ok, msg)
-
-    def _result(self, theta, x0, r, J, nfev, converged, message) -> FitResult:
-        g = theta.size
-        used = self.ok
-        n_used = int(used.sum())
-        s2, inflation = self.noise(r, g)
-        cov = covariance(J, np.array([self.specs[i].scale for i in self.free]),
-                         s2 * inflation) if g else np.zeros((0, 0))
-        full = self.full_theta(theta)
-        names = self.names
-        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        q = stats.norm.ppf(0.975)
-        per_trial = {}
-        for tr, s in zip(self.trials, self.trial_slices):
-            rr = r[s][used[s]]
-            per_trial[tr.name] = float(np.sqrt(np.mean(rr ** 2)))
-        return FitResult(
-            names=names, units=[self.specs[i].unit for i in self.free], theta=theta.copy(),
-            z=np.concatenate([theta, x0.ravel()]), cov=cov,
-            rmse=float(np.sqrt(np.sum(r ** 2) / n_used)), per_trial_rmse=per_trial,
-            nfev=int(nfev), converged=bool(converged), message=str(message),
-            inflation=float(inflation), candidates=tuple(c.id for c in self.candidates),
-            params=self.wheel_params(full),
-            values={n: float(v) for n, v in zip(names, theta)},
-            ci95={n: (float(v - q * s), float(v + q * s)) for n, v, s in zip(names, theta, sd)})
+        """Least squares to convergence (:func:`~.least_squares.solve`).  ``start``
+        overrides start values by name, ``x0`` gives window starts (w, 2)."""
+        return solve(self, start, x0, max_nfev)
 
     def window_starts(self, z: np.ndarray) -> np.ndarray:
         return z[len(self.free):].reshape(-1, 2)
@@ -594,23 +403,6 @@ def encoder_quantum(y: np.ndarray) -> float | None:
         if k.min() > 0.5 and np.max(np.abs(k - np.round(k))) < 1e-6:
             return c
     return None
-
-
-def covariance(J: np.ndarray, scale: np.ndarray, s2: float, tol: float = 1e-10) -> np.ndarray:
-    """(g, g) parameter covariance s2 (J'J)^-1 from the Jacobian J (n, g), computed in the
-    parameters' typical scales (g,).  A direction the data does not determine (relative
-    eigenvalue below ``tol``) gets infinite variance in every parameter it involves, so its
-    interval reads (-inf, inf) rather than a falsely tight one."""
-    Js = J * scale
-    w, V = np.linalg.eigh(Js.T @ Js)
-    top = max(float(w[-1]), 1e-300)
-    ok = w > tol * top
-    inv = (V[:, ok] / w[ok]) @ V[:, ok].T
-    cov = inv * s2 * np.outer(scale, scale)
-    blind = np.any(np.abs(V[:, ~ok]) > 1e-3, axis=1) if (~ok).any() else np.zeros(len(w), bool)
-    cov[blind, :] = np.where(np.eye(len(w), dtype=bool)[blind, :], np.inf, 0.0)
-    cov[:, blind] = np.where(np.eye(len(w), dtype=bool)[:, blind], np.inf, 0.0)
-    return cov
 
 
 def at_rest_trimmed(tr: Trial, band: float = REST_BAND) -> Trial:
@@ -685,31 +477,6 @@ def rest_tail(tr: Trial) -> RestTail | None:
                     float(scheduled.mean()),
                     float(tr.q[n:].astype(bool).mean()), _most(tr.eta_unwrapped[n:]),
                     _most(tr.n_a[n:][scheduled]))
-
-
-def autocorrelation_inflation(r: np.ndarray, starts: np.ndarray, used: np.ndarray,
-                              max_lag: int = 30, centred: bool = True) -> float:
-    """1 + 2 sum_{l=1..max_lag} rho_l: how much a correlated residual widens the intervals.
-
-    Least-squares intervals assume independent residuals.  A 10-bit encoder sampled at 300 Hz
-    aliases its count steps into a slow sawtooth, so neighbouring residuals are correlated
-    and carry less information than their number suggests.  The sum of the residual's
-    autocorrelations (inside windows, up to ``max_lag`` samples) is the factor by which the
-    variance of a slowly varying projection of it grows.  Never below 1.
-    """
-    num = np.zeros(max_lag + 1)
-    for w in range(starts.shape[0] - 1):
-        a, b = starts[w], starts[w + 1]
-        rr = np.where(used[a:b], r[a:b], 0.0)
-        if centred:
-            rr = rr - rr.mean()
-        m = rr.shape[0]
-        for lag in range(min(max_lag, m - 1) + 1):
-            num[lag] += float(rr[lag:] @ rr[:m - lag])
-    if num[0] <= 0.0:
-        return 1.0
-    rho = num[1:] / num[0]
-    return float(max(1.0 + 2.0 * np.sum(rho), 1.0))
 
 
 def wald_p(fit: FitResult, effect: Candidate) -> float:

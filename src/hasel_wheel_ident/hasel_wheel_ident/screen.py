@@ -68,11 +68,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.params import ParameterError, WheelParams
 
 from hasel_wheel_ident.candidates import Candidate
 from hasel_wheel_ident.data import Trial
-from hasel_wheel_ident.fit import FitResult, ParameterError, Problem, force_coordinates
+from hasel_wheel_ident.fit import FitResult, Problem, force_coordinates
 from hasel_wheel_ident.threads import with_one_blas_thread
 
 
