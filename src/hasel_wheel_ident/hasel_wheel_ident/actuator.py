@@ -3,25 +3,25 @@
 The residual analysis (:mod:`.residual`) bins the acceleration residual by the driven
 actuator, but its acceleration is a 0.2 s Savitzky-Golay derivative of the angle residual:
 at 3 rad/s one actuator is driven for about 0.13 s, so each bin mixes neighbours and carries
-far more noise than one actuator's share.  A gain spread of std 0.1 with its candidate left
-out (5 x 60 s, plant seed 11, ad hoc) binned at p = 0.65, and the only structure reported was
-its first harmonic, "periodic in wheel angle, 1 per turn", which names an off-centre mass.
+far more noise than one actuator's share; a gain spread left out is then reported as its
+first harmonic, a once-per-turn signature that names an off-centre mass.
 
 So, once the search has ended and the periodic signatures are sized, the model is tested for
 one force factor per actuator the way the library's effects are, with the fabrication spread's
 parameterisation as a measuring device: a score test of the 15 log-factors (:mod:`.screen`)
 on the final model plus the strongest periodic torque already reported (a torque fixed to
 the wheel angle shows in the actuators too, since actuator i is driven at the same wheel
-angles every turn); when significant, a refit sizes them.  Only one periodic torque can
-sit beside them (it rides on the model's pivot-lap term), so factors that follow one
-harmonic around the wheel, the shadow of a torque fixed to the wheel angle, are not reported
-as structure along the actuator index: the same rule that refuses such gains as a
-fabrication spread (:func:`~.candidates.spread_pattern`).  Like :mod:`.periodic`'s torque,
-the factors are a description, never chosen as an effect and never written to model.yaml.
-Ad hoc, 5 x 60 s, plant seed 11, gain spread not in the library: score chi^2 872 (15 dof) with
-a spread of std 0.1; 15 on data without an effect, 33 to 50 with a viscous drag, a 40 ms rise
-lag or retention of 0.2/s left out, and 152 with an off-centre mass left out when its torque
-is not beside the factors (the 15-dof chi^2 at p = 1e-6 is 56.5).
+angles every turn); when its p is under :data:`~.residual.SIGNIFICANCE`, a refit sizes them.
+Only one periodic torque can sit beside them (it rides on the model's pivot-lap term), so
+factors that follow one harmonic around the wheel, the shadow of a torque fixed to the wheel
+angle, are not reported as structure along the actuator index: the same rule that refuses
+such gains as a fabrication spread (:func:`~.candidates.spread_pattern`).  Like
+:mod:`.periodic`'s torque, the factors are a description, never chosen as an effect and
+never written to model.yaml.  The figures behind these rules are in docs/identification.md.
+Tested in ``test_ident_effects.py``
+(``test_a_gain_spread_outside_the_library_is_reported_along_the_actuator_index``,
+``test_a_periodic_torque_that_gains_could_imitate_is_not_forced_onto_them``) and
+``test_ident_actuator.py``.
 """
 from __future__ import annotations
 
@@ -53,8 +53,8 @@ def driving_acceleration(problem: Problem, fit: FitResult) -> float:
     sample of the same window counts with its length, at the mean of the actuator's share of
     the acceleration at its two ends (the trapezoid rule).  The share rises steeply through
     a push (the force acts through sin of the contact angle), so the mean of the samples
-    alone fell 7 % short of the time average (3 x 39 s nominal trials, ad hoc); a window's
-    last sample, whose interval the next window starts afresh, is left out.  For the
+    alone falls short of the time average; a window's last sample, whose interval the next
+    window starts afresh, is left out.  For the
     nominal model this is the speed the wheel gains per second on plus friction's
     deceleration (``test_ident_actuator.py``)."""
     x1, x2 = problem.simulate(fit.z)

@@ -1,7 +1,7 @@
 """The library of candidate effects: physical extensions of the hybrid model.
 
 Each candidate is a parameterised extension with a stable identifier (used in report.json
-and documented in the README).  ``apply`` writes its parameters into the model's parameter
+and documented in docs/identification.md, "Candidate effects").  ``apply`` writes its parameters into the model's parameter
 vector, so the fit, the free-run simulation, the plant and the MPC's predictor all evaluate
 the very same physics (:mod:`hasel_wheel_sim.model`).  Parameters are chosen so that "no
 effect" is a parameter value (0, or equal gains) and the fit is smooth around it.

@@ -2,7 +2,7 @@
 candidate effects) by multiple-shooting least squares, with uncertainty.
 
 Parameterisation.  F_a depends on sigma6 / (sigma2 |xi2| + sigma3), so only two ratios of
-(sigma2, sigma3, sigma6) are determined by data (docs/identification.md).  There is a
+(sigma2, sigma3, sigma6) are determined by data (docs/model.md).  There is a
 second degeneracy: with u = ln(contact angle), the bump's exponent
 -sigma1 u - (u - sigma4)^2 / sigma5^2 plus ln(sigma6) is a quadratic in u, which has three
 coefficients, while (sigma1, sigma4, sigma5, sigma6) are four.  So sigma1 cannot be told from a
@@ -413,9 +413,8 @@ def at_rest_trimmed(tr: Trial, band: float = REST_BAND) -> Trial:
 
     A glitched reading in the tail (a random count) is only left out of the band's judgement:
     ending the rest there would keep a tail of rest whose constant residual correlates the
-    whole fit's (a 0.2 % glitch rate raised the mean autocorrelation
-    :func:`~.residual.analyse` reports from 0.002 to 0.019 on clean 3 x 34 s data, plant seed
-    11, and so reported structure where there was none)."""
+    whole fit's, which :func:`~.residual.analyse` then reports as structure.  Tested in
+    ``test_ident_data.py`` (``test_a_glitch_in_the_tail_at_rest_does_not_keep_the_tail``)."""
     rest = rest_start(tr.t, tr.angle, band)
     if rest is None or rest == 0:
         return tr

@@ -27,19 +27,19 @@ The paper's Table III gives linear speed [m/s]; multiply by the wheel radius r t
 **An ensemble, not one run.**  With switching on the firmware's ticks a free run is not a
 smooth function of its start or its parameters: a contact angle that reaches its threshold
 just before or just after a tick moves that switch by 3.3 ms, and from then on the two runs
-drift apart (a change of 1e-6 in the force law has moved a 34 s trial's end by 0.4 rad, and
-its RMSE by half).  A reading from an encoder says only that the angle lies within one count,
-so each metric is the expectation over ``ENSEMBLE`` free runs whose start angles span one
-count's width evenly, centred on the fitted start (any spread above ~1e-6 rad decorrelates
-the switching over a trial, so the width matters little): the mean squared error (rmse = its root, r2 and nrmse from it) and the mean
-steady-state error.  One run's error is one draw of a noisy quantity; the ensemble's mean
-is what a model change can be judged by (for start shifts of up to 0.3 mrad, or parameter
-changes of 1e-6, the mean over 64 runs moved by 2-7 % where single runs moved by 37-50 %).  Angles without a count (motion capture) give a single run.
+drift apart: a change of 1e-6 in the force law can move a trial's RMSE by half.  A reading
+from an encoder says only that the angle lies within one count, so each metric is the
+expectation over ``ENSEMBLE`` free runs whose start angles span one count's width evenly,
+centred on the fitted start (any spread above ~1e-6 rad decorrelates the switching over a
+trial, so the width matters little): the mean squared error (rmse = its root, r2 and nrmse
+from it) and the mean steady-state error.  One run's error is one draw of a noisy
+quantity; the ensemble's mean is what a model change can be judged by.  Angles without a
+count (motion capture) give a single run.  Tested in ``test_ident_threads.py``
+(``test_a_sub_count_shift_of_the_start_barely_moves_the_ensemble``).
 
 The error has a floor: even the true model, run this way, drifts from the recording once a
-switch falls on the other side of a tick.  :func:`model_error` measures it for given values
-(on the 3 x 34 s test trials with viscous drag the true model's error is about half the
-nominal model's).  A fitted model can land a little below it on held-out data by chance,
+switch falls on the other side of a tick.  :func:`model_error` measures it for given values.
+A fitted model can land a little below it on held-out data by chance,
 never far.
 """
 from __future__ import annotations

@@ -3,9 +3,8 @@
 The residual analysis (:mod:`.residual`) finds a periodic structure in what the fitted model
 leaves, and sizes it from that residual.  But the fit had already bent the model (the force
 law's shape, friction) to take up part of the structure before the residual was looked at,
-so the residual shows less than all of it: an outside-library pull of 0.004 N*m came out
-as 0.0027 N*m.  Here the structure is measured the way the library's effects are: a torque
-periodic along the same axis with the same period,
+so the residual shows less than all of it.  Here the structure is measured the way the
+library's effects are: a torque periodic along the same axis with the same period,
 
     tau = P sin(k xi1) + Q cos(k xi1)          P, Q [N*m], k = 2 pi / (its period in xi1)
 
@@ -13,7 +12,11 @@ is added to the model and refitted together with everything else; its amplitude
 hypot(P, Q) and the phase atan2(Q, P) replace the residual's figures.  This term is a
 measuring device, not an explanation: it is never chosen as an effect and never goes into
 ``model.yaml``.  It rides on the model's pivot-lap term (the frequency in its ``r/L`` slot),
-so it is not used when that term is already part of the model.
+so it is not used when that term is already part of the model.  Tested in
+``test_ident_candidates.py`` (``test_the_signature_term_is_the_torque_it_names``),
+``test_ident_residual.py``
+(``test_a_period_is_confirmed_by_its_refits_wald_test_against_the_closed_form``) and
+``test_ident_effects.py`` (``test_an_effect_outside_the_library_is_reported_not_forced``).
 """
 from __future__ import annotations
 
@@ -59,11 +62,9 @@ def periodic_torque(k: float) -> Candidate:
 def confirmed(sig: Signature) -> bool:
     """False for a signature sized by a refit (:func:`sized`) whose Wald test does not reach
     :data:`~.residual.SIGNIFICANCE` or whose amplitude is under
-    :data:`~.residual.MIN_AMPLITUDE`: the model refitted with that torque does not need it.
-    (Seen beside a drift: a 40 ms rise lag with its candidate left out, 5 x 60 s, plant seed
-    11, ad hoc, had the residual's periodograms name periods of 3.83, 2.63 and 2.08 per
-    wheel turn; refitted, 0.0032 and 0.0003 rad/s^2 for the first two, the second's 95 %
-    interval from 0.)  True for every other signature."""
+    :data:`~.residual.MIN_AMPLITUDE` [rad/s^2]: the model refitted with that torque does
+    not need it (a drift can make the residual's periodograms name periods that are not
+    there).  True for every other signature."""
     if sig.torque_ci95 is None:
         return True
     return sig.p_value < SIGNIFICANCE and sig.amplitude >= MIN_AMPLITUDE
@@ -77,8 +78,8 @@ def measure(sig: Signature, trials: list[Trial], base: WheelParams,
     (``sig``, None, None) unchanged when it is not periodic along an angle or the model
     already has a pivot-lap term.  The refit starts where the score test's step predicts
     the lower error (:func:`~.screen.screened_refit`): from the refitted model the torque
-    crept, 0.0033 N*m of 0.004 after 10 evaluations and 0.00396 after 100, while from the
-    reference force law 10 gave 0.00401."""
+    creeps towards its size over many evaluations, from the reference force law it reaches
+    it in a few."""
     k = frequency(sig, base)
     if k is None or any(c.id == "platform_periodic" for c in effects):
         return sig, None, None

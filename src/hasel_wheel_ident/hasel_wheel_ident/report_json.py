@@ -142,7 +142,7 @@ numerics                   {blas: [{library, version, kernels}], coretype_env}: 
                             "Haswell" on x86-64)
 =========================  ===============================================================
 
-The stable effect identifiers are those of :mod:`.candidates` (README, "Identification").
+The stable effect identifiers are those of :mod:`.candidates` (docs/identification.md, "Candidate effects").
 """
 from __future__ import annotations
 

@@ -157,7 +157,7 @@ def _friction(ident: Identification, data: dict, nb: Evaluation, na: Evaluation)
         L += [f"| {k} [{v['unit']}] | {v['value']:.5g} | {_ci(v['ci95'])} | {after:.5g} |"]
     L += ["", "The fit works in the coordinates the data determines (peak, centre, width, "
           "b = σ2/σ3, τf). σ1, σ4, σ6 trade off along one direction and σ2, σ3, σ6 along "
-          "another (model-notes.md), so σ1 and σ3 stay at their reference values.", ""]
+          "another (docs/model.md), so σ1 and σ3 stay at their reference values.", ""]
     if data.get("identifiability"):
         L += ["Identifiability (singular values of the data's sensitivity to the paper's "
               "parameters, relative):", "", "```"] + data["identifiability"] + ["```", ""]

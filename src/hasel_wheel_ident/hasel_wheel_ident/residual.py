@@ -45,10 +45,10 @@ TREND_AXES = ("time", "hv_time", "speed")
 TREND_SIGNIFICANCE = 1e-4
 #: The periodograms' longest period: the longest trial's span (in time, in wheel angle) over
 #: this many cycles, without a drift.  A shape of fewer cycles is no period one can name:
-#: after a rise lag and a gain spread were named for retention of 0.2/s (3 x 34 s, seeds 11
-#: and 13, ad hoc), a scan from 1.5 cycles reported "periodic in time with period 22.6 s"
-#: and "in wheel angle with period 60.8 rad", 1.5 and 1.6 cycles of the longest trial.  A
-#: pivot lap (25.66 rad of wheel angle) is scanned on trials spanning 51 rad or more.
+#: an effect left out that drifts through each trial reads as a period of one to two cycles
+#: of the longest trial.  A pivot lap (25.66 rad of wheel angle) is scanned on trials
+#: spanning 51 rad or more.  Tested in ``test_ident_residual.py``
+#: (``test_without_a_drift_the_scans_keep_one_level_per_trial_and_slow_periods``).
 FEWEST_CYCLES = 2.0
 #: With a drift found (:func:`drive_trend`), the periodograms start at this many cycles: a
 #: quadratic per drive then takes up the drift's shape, and part of a slower sinusoid
@@ -332,11 +332,11 @@ def scan_nuisance(problem: Problem, t_rel: np.ndarray, wins: np.ndarray,
     the drive leaves a defect that drifts through it, with a bend where the wheel spins up,
     and the force law's mean misfit shows only while driven, as a step at the coast.  With
     one level per trial, a periodogram takes such a drift for a sinusoid of about one cycle
-    per trial (seen with charge retention of 0.2/s left out: "periodic in time with period
-    22.6 s" and "in wheel angle with period 60.8 rad", 3 x 34 s, seed 11, ad hoc).  A slow
-    drift is a trend, not a period.  A quadratic takes up its shape, and with it part of a
-    slow sinusoid: at worst 92 % of its variance at one cycle per drive, 43 % at 1.5, 15 %
-    at 2 and 7 % at 3, hence the scan from :data:`MIN_CYCLES` then."""
+    per trial.  A slow drift is a trend, not a period.  A quadratic takes up its shape, and
+    with it part of a slow sinusoid: at worst 92 % of its variance at one cycle per drive,
+    43 % at 1.5, 15 % at 2 and 7 % at 3, hence the scan from :data:`MIN_CYCLES` then.  Tested in
+    ``test_ident_residual.py``
+    (``test_a_slow_drift_is_not_taken_for_a_period_but_a_real_one_is_found``)."""
     t = window_means(problem, t_rel, wins)
     driven = driven_windows(problem, wins)
     cols = []
@@ -653,16 +653,12 @@ def autocorrelation_signature(diag: Diagnostics, inertia: float) -> Signature | 
     The windows re-start the model from fitted states every ``window`` seconds, and a
     force law fitted freely can take up an effect the model lacks within each of them: the
     bins and spectra then find nothing, while the angle residual stays correlated from one
-    sample to the next, and the free run drifts.  Seen with viscous drag (1.5e-3 N*m*s/rad)
-    and a 200 ms rise lag, each with its candidate left out (3 x 34 s, plant seed 12; ad
-    hoc): every axis p = 1, no signature, the nominal free run 2.9x and 3.5x worse than the
-    true model's; the mean autocorrelation over lags of up to 0.2 s was 0.069 and 0.041 (on
-    5 x 60 s, seed 13: 0.025 for the drag).  For models with the right effects, and on data
-    without one, it stayed within -0.002..0.003 (5 runs: clean and the drag or a 200 ms rise
-    lag identified, 3 x 34 s and 5 x 60 s).  Counted when above ``CORRELATED_SHARE``
-    and five standard deviations of a white residual's.  The fraction of lags outside the
-    99 % band is no use for this: it grows with the length of the data for the right model
-    too (0.15 on clean 5 x 60 s data, 0.37 with viscous drag identified).
+    sample to the next, and the free run drifts.  The mean autocorrelation over lags of up
+    to 0.2 s is the measure: counted when above ``CORRELATED_SHARE`` [1] and five standard
+    deviations of a white residual's (the evidence is in docs/identification.md).  The
+    fraction of lags outside the 99 % band is no use for this: it grows with the length of
+    the data for the right model too.  Tested in ``test_ident_residual.py``
+    (``test_a_correlated_residual_without_structure_gets_a_signature_a_white_one_none``).
 
     Its size is given as an equivalent acceleration [rad/s^2]: the constant acceleration
     error a that, in a window of length T re-started from a fitted angle and speed, leaves

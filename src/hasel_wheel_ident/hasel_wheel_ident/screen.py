@@ -10,7 +10,7 @@ out) predicts how far the squared error would fall:
 
 Under "the candidate is absent", delta / (s^2 x inflation) follows chi^2 with k degrees of
 freedom (Rao's score test), s^2 the residual variance and the inflation the factor for the
-residual's autocorrelation (:func:`~.fit.autocorrelation_inflation`).  An effect whose
+residual's autocorrelation (:func:`~.uncertainty.autocorrelation_inflation`).  An effect whose
 derivative vanishes at its null value (a rise time of 0) is screened at its start value
 instead, where it has a gradient; the step is then predicted from there.
 
@@ -19,42 +19,34 @@ reference force law (with the current tau_f).  A model that bent its force law t
 missing effect can sit far from where the true force law and that effect together are best;
 the full fit starts from whichever place predicts the lower error.  A candidate far from
 linear in its parameters is also screened at the further values it lists
-(``Candidate.screen_at``), from both places.  A 50 ms rise lag on 3 x 34 s, which the
-nominal force law half absorbs, scored chi^2 8 from a rise time of 5 ms and 227 once 20 and
-60 ms were added; refitted, it cut the held-out simulation error 3.8x, tau within 2 % (ad-hoc
-runs; test_ident_effects.py asserts it is named, within 10 %, the error at least halved).
+(``Candidate.screen_at``), from both places: a rise lag that the nominal force law half
+absorbs scores little from a rise time near zero and far more from the rise times it lists.
 
 One Gauss-Newton step predicts well only near the optimum.  A candidate with a ``scan`` grid
 (the rise lag: 10 ms to 0.32 s in factors of 2) is also evaluated, not predicted, at every
 grid value from both places; where the error falls significantly at a place alone, a short
-fit from the best grid value gives one more place (:func:`scan_places`).  Seen with a 120 ms
-rise lag on 3 x 34 s (plant seed 7): the nominal fit bent its force law (peak 83, width
-0.23, b 2.9; the truth 19.8, 0.10, 0.52), and from there and from the reference at 5, 20 and
-60 ms the step predicted little (chi^2 46, fourth); an angle offset led, was refused, and a
-gain spread plus charge retention were named.  Stepped from the reference at 80 or 160 ms it
-still predicted nothing, but at the reference force law the error is lowest near 120 ms
-(0.42 mrad, against 2.0 at 60 ms), and the short fit from there scored chi^2 376 and started
-the refit that named the rise lag (117.6 ms, held-out simulation error 4.2x lower).  On data
-without the effect the scan finds nothing significant and adds no fit.
+fit from the best grid value gives one more place (:func:`scan_places`).  A slow rise lag
+that the nominal fit bends its force law to mimic is then found where one step from either
+place predicts little; on data without the effect the scan finds nothing significant and
+adds no fit (``test_ident_effects.py``:
+``test_a_slow_rise_lag_that_the_force_law_bends_to_mimic_is_found_by_the_scan``).
 
 A current fit that looks bent (:func:`bent`: it stopped at its evaluation limit, or a
 nominal parameter ended on a bound) gets one more place per candidate: a short fit
 (:data:`RESTART_NFEV` evaluations) of the model with the candidate, from the reference force
-law, tau_f and braking gain. In a closed loop the pushes and brakes answer a disturbance, so
-the nominal force law can take much of it up. Seen on `hasel_wheel demo --wheels 3
---hold-scale 0.5` with a platform torque of 0.004 N*m (3 x 115 s, plant seed 3; ad hoc): the
-nominal fit stopped after 100 evaluations at peak 257, width 0.021 and the braking gain on
-its bound of 100 (the truth about 20, 0.10 and 3). From there and from the reference force
-law with that braking gain, one step predicted nothing (chi^2 13) and nothing was named. The
-short fit from the reference reached the noise floor (window RMSE 0.287 mrad against 0.626),
-chi^2 1306 (4 evaluations; 1309 with 8), and the refit named the torque (0.00397 N*m at 0.50
-rad, held-out simulation error 1.76 -> 0.040 rad/s). The place counts with the error its fit
-reached (:func:`short_fit`), and the current model's own short fit from the same values
-(:func:`restart_from`, once per round) sets the baseline where it is lower than the current
-fit's, so that a candidate is not credited with what the restart alone gains. A fit that
-converged inside its ranges does not get this place, nor does one on trials with coast-downs
-that only stopped unconverged (:meth:`~.search.Search._screen`: there the steps, the scan and the
-second start name the effects, and the short fits only cost time).
+law, tau_f and braking gain.  In a closed loop the pushes and brakes answer a disturbance,
+so the nominal force law can take much of it up and end bent, where one step predicts
+nothing; the short fit from the reference reaches the noise floor and names the effect
+(``test_ident_effects.py``:
+``test_a_torque_a_closed_loop_leans_against_is_found_from_the_reference_force_law``,
+``test_strong_retention_that_bends_the_nominal_fit_is_screened_from_the_reference_law``).
+The place counts with the error its fit reached (:func:`short_fit`), and the current
+model's own short fit from the same values (:func:`restart_from`, once per round) sets the
+baseline where it is lower than the current fit's, so that a candidate is not credited with
+what the restart alone gains.  A fit that converged inside its ranges does not get this
+place, nor does one on trials with coast-downs that only stopped unconverged
+(:meth:`~.search.Search._screen`: there the steps, the scan and the second start name the
+effects, and the short fits only cost time).
 
 The statistic is the best place's, not corrected for trying several: it only chooses what
 to refit, and the refit's held-out errors and Wald test decide.  (The scan's short fit makes
