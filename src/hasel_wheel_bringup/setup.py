@@ -28,5 +28,6 @@ setup(
         "hasel_wheel = hasel_wheel_bringup.cli:main",
         "hasel_wheel_bag = hasel_wheel_bringup.bag_cli:main",
         "trial_node = hasel_wheel_bringup.trial_node:main",
+        "profile_node = hasel_wheel_bringup.profile_node:main",
     ]},
 )

@@ -20,7 +20,8 @@ NODES = [("hasel_wheel_driver.driver_node", "DriverNode"),
          ("hasel_wheel_sim.sim_node", "SimNode"),
          ("hasel_wheel_mpc.observer_node", "ObserverNode"),
          ("hasel_wheel_mpc.mpc_node", "MpcNode"),
-         ("hasel_wheel_bringup.trial_node", "TrialNode")]
+         ("hasel_wheel_bringup.trial_node", "TrialNode"),
+         ("hasel_wheel_bringup.profile_node", "ProfileNode")]
 #: Topics every rclpy node has, not ours.
 BUILT_IN = {"/rosout", "/parameter_events"}
 
