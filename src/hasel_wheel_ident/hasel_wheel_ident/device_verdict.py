@@ -5,12 +5,14 @@ all trials with it [rad/s], ``sim_rmse_model_rad_s`` without it, and optionally
 ``wald_p_together`` its Wald p with all the devices refitted together.  Tested in
 ``test_ident_consistency.py``
 (``test_the_device_that_takes_up_the_most_of_a_drift_must_cut_it_and_beat_the_other``,
-``test_the_device_alone_significant_beside_the_other_takes_up_the_most``)."""
+``test_the_device_alone_significant_beside_the_other_takes_up_the_most``).  Its verdict is a
+:class:`~.reasons.Finding` (:func:`devices_finding`)."""
 from __future__ import annotations
 
 import math
 
 from hasel_wheel_ident.measuring_devices import BESIDE_P, DEVICE_WORDS, LOOKALIKE_P
+from hasel_wheel_ident.reasons import Finding, Reason
 
 
 def lead_device(devices: dict[str, dict], min_gain: float) -> str | None:
@@ -61,28 +63,41 @@ def _finite(devices: dict[str, dict]) -> dict[str, dict]:
 
 
 def devices_verdict(devices: dict[str, dict], min_gain: float) -> str:
-    """Which measuring device takes up the most of a drift (:func:`lead_device`), in words
-    (a description, not a name); else why none does."""
+    """:func:`devices_finding` in words (a description, not a name)."""
+    return devices_finding(devices, min_gain).text
+
+
+def devices_finding(devices: dict[str, dict], min_gain: float) -> Finding:
+    """Which measuring device takes up the most of a drift (:func:`lead_device`): code
+    ``DEVICE_LEADS`` with values ``lead`` (its id) and ``together`` (whether the refit of
+    the devices together singled it out, :func:`together_lead`); else why none does,
+    ``NO_DEVICE_REFITTED`` (no finite figures), ``NO_DEVICE_CUTS`` (none cuts the model's
+    free run by half of ``min_gain``) or ``DEVICES_NOT_TOLD_APART``, with value ``need``
+    (that half, a fraction)."""
     lead = lead_device(devices, min_gain)
     if lead is not None:
-        return _lead_words(devices, lead)
+        together = lead == together_lead(_finite(devices))
+        return Finding(Reason.DEVICE_LEADS, _lead_words(devices, lead, together),
+                       {"lead": lead, "together": together})
     devices = _finite(devices)
     if not devices:
-        return "no device could be refitted beside the model"
+        return Finding(Reason.NO_DEVICE_REFITTED, "no device could be refitted beside the model")
     need = 0.5 * min_gain
     if all(1.0 - d["sim_rmse_rad_s"] / d["sim_rmse_model_rad_s"] < need
            for d in devices.values()):
-        return (f"no device takes up much of it (each cuts the free run on all trials by less "
-                f"than {100 * need:.0f} %)")
-    return (f"no device takes up clearly more of it than the others (free runs within "
-            f"{100 * need:.0f} % of each other): its shape is not told")
+        return Finding(Reason.NO_DEVICE_CUTS,
+                       f"no device takes up much of it (each cuts the free run on all trials "
+                       f"by less than {100 * need:.0f} %)", {"need": need})
+    return Finding(Reason.DEVICES_NOT_TOLD_APART,
+                   f"no device takes up clearly more of it than the others (free runs within "
+                   f"{100 * need:.0f} % of each other): its shape is not told", {"need": need})
 
 
-def _lead_words(devices: dict[str, dict], lead: str) -> str:
+def _lead_words(devices: dict[str, dict], lead: str, together: bool) -> str:
     """The device ``lead`` in words, with the Wald p of each device refitted together when
-    that singled it out."""
+    that singled it out (``together``)."""
     why = ""
-    if lead == together_lead(_finite(devices)):
+    if together:
         others = ", ".join(f"{DEVICE_WORDS[k][0]} {d['wald_p_together']:.1e}"
                            for k, d in devices.items() if k != lead)
         why = (f": refitted together, only it stays significant (Wald p "

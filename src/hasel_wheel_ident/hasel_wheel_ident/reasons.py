@@ -33,6 +33,15 @@ class Reason(StrEnum):
     DRIFT_STAND_IN = "drift_stand_in"
     HV_LOSS_LOOKALIKE = "hv_loss_lookalike"
     SWITCH_ON_LAG_STAND_IN = "switch_on_lag_stand_in"
+    # cautions on an accepted effect: evidence that it may stand in, short of a refusal
+    LEANS_ON_SPEED = "leans_on_speed"
+    DRIFTS_WITHIN_TRIALS = "drifts_within_trials"
+    HOLDS_BESIDE_HV_LOSS = "holds_beside_hv_loss"
+    # which measuring device takes up the most of an unexplained drift
+    DEVICE_LEADS = "device_leads"
+    NO_DEVICE_REFITTED = "no_device_refitted"
+    NO_DEVICE_CUTS = "no_device_cuts"
+    DEVICES_NOT_TOLD_APART = "devices_not_told_apart"
     # the choice between refits, and the checks after it
     TIE = "tie_not_named"
     NAMED_TOGETHER = "named_together"

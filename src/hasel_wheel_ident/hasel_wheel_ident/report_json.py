@@ -29,17 +29,20 @@ effects                    [{id, title, parameters: {name: {value, unit, ci95}},
                             for the chosen ones (wald_p: "absent" in the final model);
                             consistency: {units, speed_exponent, speed_exponent_sd,
                             speed_trend_p, drift_exponent, drift_exponent_sd, drift_p,
-                            beside_hv_loss, beside_on_lag, caution} the effect refitted
-                            trial by trial
+                            beside_hv_loss, beside_on_lag, caution, caution_codes} the
+                            effect refitted trial by trial
                             (units "trial"), or span by span when the trials' speeds
                             differ by less than 1.2x ("span", each drive cut in up to
                             six), size ~ speed^k, and on the halves of each drive (size ~
                             hv^h), as checked when it was added (trial_refit.py);
                             caution: a sentence for each warning (its size leans on
                             the speed short of refusal, or changes within the
-                            trials), else null; an exponent and its p are null where
-                            they cannot be formed; beside_hv_loss {rate_per_s, values, wald_p,
-                            device_wald_p, sim_rmse_rad_s, sim_rmse_without_rad_s}: a
+                            trials), else null; caution_codes the code of each
+                            (reasons.Reason: leans_on_speed, drifts_within_trials,
+                            holds_beside_hv_loss), [] when none; an exponent and its p
+                            are null where they cannot be formed; beside_hv_loss
+                            {rate_per_s, values, wald_p, device_wald_p, sim_rmse_rad_s,
+                            sim_rmse_without_rad_s}: a
                             drifting effect (or any rise lag) refitted beside a force
                             loss growing with HV time (the device's rate, the effect's
                             own parameters there by name in their units, its Wald p
@@ -152,7 +155,7 @@ import numpy as np
 
 from hasel_wheel_ident.acceptance import near_misses
 from hasel_wheel_ident.candidates import BY_ID, Candidate
-from hasel_wheel_ident.cautions import caution
+from hasel_wheel_ident.cautions import caution, cautions
 from hasel_wheel_ident.consistency import Consistency
 from hasel_wheel_ident.data import find_coasts
 from hasel_wheel_ident.evaluation import Evaluation
@@ -386,7 +389,8 @@ def consistency_json(c: Candidate, con: Consistency | None) -> dict | None:
             "drift_p": json_number(con.drift_p) if drift else None,
             "beside_hv_loss": _beside(con.beside),
             "beside_on_lag": _beside(con.beside_lag),
-            "caution": caution(c, con)}
+            "caution": caution(c, con),
+            "caution_codes": [f.code.value for f in cautions(c, con)]}
 
 
 def _beside(b: Beside | None) -> dict | None:
