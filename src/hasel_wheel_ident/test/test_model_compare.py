@@ -1,7 +1,7 @@
 """Closing the identification loop: one plant with an off-centre mass, controlled once with the
 paper's model and once with the true (identified) extensions; metrics are deterministic.
 
-The plant: com_offset 0.004 N*m at 0.5 rad (the README's identification example) plus the
+The plant: com_offset 0.004 N*m at 0.5 rad (the example in docs/identification.md) plus the
 10-bit encoder, ticks, seed 1; 20 s at 1.0 rad/s then 20 s at 1.5 rad/s (about 4 s wall per
 pair of runs).  The effect's convention -T sin(xi1 + phase) (effects.py) is the model's
 Extensions.com_torque/com_phase term (model.py), and EffectsConfig.extensions() copies them
@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from hasel_wheel_mpc import closed_loop, controller
+from hasel_wheel_mpc import closed_loop
 from hasel_wheel_ident.model_compare import compare_controllers, tracking_metrics
 from hasel_wheel_mpc.observer import ObserverConfig
 from hasel_wheel_sim.effects import effects_from_mapping
@@ -90,28 +90,35 @@ def test_same_seed_same_metrics(default_observer):
     np.testing.assert_equal(again["zero"], default_observer["nominal"])
 
 
-def test_the_controller_gets_its_own_model_and_the_plant_keeps_its_own(monkeypatch):
-    seen = {}
-    plant_params = WheelParams().with_values(tau_f=0.012)
+def _logged(log: closed_loop.LoopLog) -> dict:
+    """Everything a run logged, decisions included, for comparing two runs."""
+    return {**{k: v.tolist() for k, v in log.arrays().items()},
+            "decisions": [(t, repr(d)) for t, d in log.decisions]}
+
+
+def _frozen() -> float:
+    return 0.0
+
+
+def test_the_controller_gets_its_own_model_and_the_plant_keeps_its_own():
+    # run_closed_loop with a controller model runs exactly as that controller against the
+    # plant given; without one, the controller takes the plant's parameters and no extension
+    plant = WheelParams().with_values(tau_f=0.012)
     ctrl = WheelParams().with_values(sigma6=20.0)
     ext = Extensions(viscous=1e-4)
 
-    class Spy:
-        def __init__(self, name, cls):
-            self.name, self.cls = name, cls
+    def run(cfg_params, cfg_ext, plant_params):
+        cfg = closed_loop.controller_config(controller_params=cfg_params,
+                                            controller_extensions=cfg_ext)
+        return _logged(closed_loop.run_controller(cfg, PROFILE, 1.0, None, plant_params,
+                                                  clock=_frozen))
 
-        def __call__(self, params, extensions=None, **kw):
-            seen[self.name] = (params, extensions)
-            return self.cls(params, extensions, **kw)
-
-    monkeypatch.setattr(controller, "Observer", Spy("observer", controller.Observer))
-    monkeypatch.setattr(controller, "Mpc", Spy("mpc", controller.Mpc))
-    log = closed_loop.run_closed_loop(PROFILE, 0.2, params=plant_params, controller_params=ctrl,
-                                      controller_extensions=ext)
-    assert seen == {"observer": (ctrl, ext), "mpc": (ctrl, ext)}
-    assert len(log.t) > 0
-    closed_loop.run_closed_loop(PROFILE, 0.2, params=plant_params)      # default: the plant's model
-    assert seen == {"observer": (plant_params, Extensions()), "mpc": (plant_params, Extensions())}
+    own = _logged(closed_loop.run_closed_loop(PROFILE, 1.0, params=plant, controller_params=ctrl,
+                                              controller_extensions=ext, clock=_frozen))
+    assert own == run(ctrl, ext, plant)
+    assert own != run(plant, Extensions(), plant) and own != run(ctrl, ext, ctrl)
+    default = _logged(closed_loop.run_closed_loop(PROFILE, 1.0, params=plant, clock=_frozen))
+    assert default == run(plant, Extensions(), plant)
 
 
 def test_tracking_metrics_leave_out_the_settling_time():
