@@ -43,6 +43,8 @@ START_PERIOD = 30
 START_LEAD = 0.1
 #: Encoder samples the start policy reads the wheel's speed from [samples].
 START_SAMPLES = 30
+#: The least time those samples must span before a start command is aimed [s].
+START_WINDOW = 0.02
 #: Command angles remembered by sequence number (the latched one is always recent) [count].
 ANGLES_KEPT = 64
 
@@ -118,9 +120,9 @@ class ControlCore:
 
     The MPC decides where :func:`decision_point` says.  Until the first switch-on, at every
     other sample the core sends a start command (sequence 0, the pad whose activation angle
-    ``START_ANGLES[0]`` is next ahead, at ``START_ANGLES``) whenever no pad is latched within
-    the next two sectors, at once when the wanted pad changes and otherwise every
-    ``START_PERIOD`` samples.  The estimator updates at each switch-off of the actuator of
+    ``START_ANGLES[0]`` is next ahead of the encoder's angle and speed, at ``START_ANGLES``)
+    whenever no pad is latched within the next two sectors, at most every ``START_PERIOD``
+    samples.  The estimator updates at each switch-off of the actuator of
     interest from the mean speed over the cycle that ended and the prediction made for it.
     ``clock`` [s] is the MPC's clock for its deadline (default wall time).
     """
@@ -148,7 +150,7 @@ class ControlCore:
         self._fd = 0.0
         self._last_ref: float | None = None
         self._new_ref = False
-        self._start_pad, self._start_idle = -1, 0
+        self._start_idle = 0
 
     @property
     def d(self) -> float:
@@ -252,24 +254,27 @@ class ControlCore:
             self._angles.popitem(last=False)
 
     def _start(self, e: Estimate) -> Command | None:
-        """The start policy's command at this estimate, or None: a pad is latched whose
-        switch-on is within two sectors ahead, or passed by less than the wheel turns in
-        ``START_LEAD`` (the estimate may lead the wheel; the pad is switching on now), or
-        the command sent is still on its way."""
-        (t0, a0), (t1, a1) = ((self._encoder[0], self._encoder[-1]) if len(self._encoder) > 1
-                              else ((0.0, e.xi1), (0.0, e.xi1)))
-        speed = (a1 - a0) / (t1 - t0) if t1 - t0 >= 0.02 else max(e.xi2, 0.0)
+        """The start policy's command at this estimate, or None: the encoder has not yet
+        spanned ``START_WINDOW`` (the start pad comes from the encoder, not from an observer
+        still converging), a pad is latched whose switch-on is within two sectors ahead or
+        passed by less than the wheel turns in ``START_LEAD`` (the estimate may lead the
+        wheel), or the last start command went out less than ``START_PERIOD`` samples ago
+        (it may still be on its way; re-aiming at once would make the target flip between
+        two pads)."""
+        if len(self._encoder) < 2 or self._encoder[-1][0] - self._encoder[0][0] < START_WINDOW:
+            return None
+        (t0, a0), (t1, a1) = self._encoder[0], self._encoder[-1]
+        speed = (a1 - a0) / (t1 - t0)
         if -max(speed, 0.0) * START_LEAD < e.act_counter <= 2.0 * SECTOR:
             return None
-        cmd = self.start_command(a1, speed)
-        if cmd.n_a == self._start_pad and self._idle - self._start_idle < START_PERIOD:
+        if self.starts and self._idle - self._start_idle < START_PERIOD:
             return None                                          # in flight
-        return self.sent_start(cmd)
+        return self.sent_start(self.start_command(a1, speed))
 
     def sent_start(self, cmd: Command) -> Command:
         """Record that the start command ``cmd`` goes out now (the embedded runner sends
         the first one before the first sample); returns it."""
-        self._start_pad, self._start_idle = cmd.n_a, self._idle
+        self._start_idle = self._idle
         self._sent(cmd)
         self.starts += 1
         return cmd

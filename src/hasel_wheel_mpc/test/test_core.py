@@ -8,10 +8,12 @@ import pytest
 
 from hasel_wheel_common import samples
 from hasel_wheel_mpc.closed_loop import WheelLoop, controller_config, reference_at
-from hasel_wheel_mpc.core import START, START_ANGLES, START_LEAD, START_PERIOD, ControlCore
+from hasel_wheel_mpc.core import (START, START_ANGLES, START_LEAD, START_PERIOD, START_WINDOW,
+                                  ControlCore)
 from hasel_wheel_mpc.observer import Estimate, Observer, estimate_from_msg
 from hasel_wheel_sim.model import SECTOR
-from hasel_wheel_sim.plant import PlantConfig
+from hasel_wheel_sim.params import WheelParams
+from hasel_wheel_sim.plant import Plant, PlantConfig
 
 
 def _estimate(xi1=0.0, xi2=1.0, q=0, act=math.inf, deact=math.inf, eta=0) -> Estimate:
@@ -25,21 +27,29 @@ def _feed(core: ControlCore, k: int, e: Estimate, speed: float = 1.0):
     return core.step(e._replace(xi1=e.xi1 + speed * t), 1.0)
 
 
-def test_a_wheel_with_no_pad_latched_gets_the_next_pad_at_the_start_angles():
+#: The first sample at which the encoder spans START_WINDOW (300 Hz samples from 0).
+FIRST = math.ceil(START_WINDOW * 300 - 1e-9)
+
+
+def test_a_wheel_with_no_pad_latched_gets_the_next_pad_ahead_of_the_encoder():
     core = ControlCore(controller_config())
-    r = _feed(core, 0, _estimate(xi1=0.3))
+    # an observer still converging reads 5 rad/s; the encoder says 1 rad/s
+    out = [_feed(core, k, _estimate(xi1=0.3, xi2=5.0)) for k in range(FIRST + 1)]
+    assert [r.command for r in out[:FIRST]] == [None] * FIRST
     lead = core.mpc.config.deadline_margin + START_LEAD
-    # the first pad whose activation angle is ahead of 0.3 rad + 1 rad/s x lead
-    want = math.floor((0.3 + lead - START_ANGLES[0]) / SECTOR) + 1
-    assert r.why == START and r.decision is None
-    assert r.command == samples.Command(want, *START_ANGLES, 0)
+    angle = 0.3 + FIRST / 300.0
+    # the first pad whose activation angle is ahead of the angle + 1 rad/s x lead
+    want = math.floor((angle + lead - START_ANGLES[0]) / SECTOR) + 1
+    assert out[FIRST].why == START and out[FIRST].decision is None
+    assert out[FIRST].command == samples.Command(want, *START_ANGLES, 0)
 
 
 def test_the_start_command_is_sent_again_only_after_its_period():
     core = ControlCore(controller_config())
     e = _estimate(xi1=0.0, xi2=0.0)
-    sent = [k for k in range(3 * START_PERIOD + 1) if _feed(core, k, e, speed=0.0).command]
-    assert sent == [0, START_PERIOD, 2 * START_PERIOD, 3 * START_PERIOD]
+    sent = [k for k in range(FIRST + 3 * START_PERIOD + 1)
+            if _feed(core, k, e, speed=0.0).command]
+    assert sent == [FIRST + n * START_PERIOD for n in range(4)]
 
 
 def test_no_start_command_while_a_pad_is_latched_within_two_sectors():
@@ -129,3 +139,36 @@ def test_the_embedded_runner_starts_with_the_core_start_command(both_paths):
     start, _, _, loop = both_paths
     assert start.sequence == 0 and (start.phi_a, start.phi_d) == START_ANGLES
     assert loop.ctrl.core.starts == 1 and loop.ctrl.core.started
+
+
+def test_a_node_that_hears_the_estimate_before_its_telemetry_still_starts_the_wheel():
+    """In the ROS graph estimates can reach mpc_node before the telemetry samples they are
+    for, here ten at a time, and the observer's first estimates overshoot: the start pads
+    then never step back and the wheel's first switch-on comes within a second."""
+    cfg = controller_config()
+    plant = Plant(WheelParams(), PlantConfig(switching="tick"), xi2=1.0)
+    observer = Observer(cfg.params, cfg.extensions, config=cfg.observer)
+    observer.command_sent(0, *START_ANGLES)
+    core = ControlCore(cfg, clock=lambda: 0.0)
+    pending, starts, first_on, held = None, [], None, []
+    while plant.t < 1.0 and first_on is None:
+        s = plant.step(pending)
+        pending = None
+        if s is None:
+            continue
+        s = samples.as_received(s)
+        r = core.step(observer.step(s), 1.0)            # the estimate first ...
+        held.append(s)
+        if len(held) == 10:                             # ... then its samples, in a burst
+            for h in held:
+                core.telemetry(h.t, h.angle, h.last_command_sequence)
+            held = []
+        if r.command is not None:
+            pending = r.command
+            observer.command_sent(r.command.sequence, r.command.phi_a, r.command.phi_d)
+            if r.why == START:
+                starts.append(r.command.n_a)
+        if s.q:
+            first_on = s.t
+    assert starts and starts == sorted(starts)
+    assert first_on is not None and first_on < 1.0
