@@ -408,7 +408,7 @@ def _lag_beside_loss(effects: dict, seed: int) -> tuple[K.Consistency, str | Non
 
 
 def test_a_rise_lag_standing_in_for_weak_retention_is_refused_beside_the_loss():
-    # retention of 0.05/s (plant seed 12): a rise lag fitted to it (26 ms, ad hoc) is one
+    # retention of 0.05/s (plant seed 12): a rise lag fitted to it is one
     # value through each drive, so no drift calls for the device; refitted beside it anyway,
     # the device takes the plant's rate and is itself significant, while the lag is no
     # longer needed: it stands in for the loss
