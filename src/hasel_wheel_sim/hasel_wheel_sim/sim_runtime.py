@@ -16,8 +16,13 @@ from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import Plant, PlantConfig
 from hasel_wheel_sim.wheel import TICK, CommandError, HybridState, validate_command
 
-#: At most this many ticks per call; beyond it the sim falls behind the wall clock (counted).
-MAX_TICKS_PER_CALL = 60
+#: At most this much wall time is caught up in one call [s] (15 ticks at time scale 1).  A
+#: sim further behind its wall clock drops the rest of its backlog and goes on from there: a
+#: real wheel cannot run ahead to catch up, and a burst would outrun the commands the
+#: controller sends in reply (each drop is counted in ``overruns``).  Test:
+#: ``test_sim_runtime.py::test_falling_behind_drops_the_backlog_and_is_counted``.
+MAX_LAG = 0.05
+MAX_TICKS_PER_CALL = round(MAX_LAG / TICK)     # at time scale 1 [ticks]
 
 
 @dataclass(frozen=True)
@@ -80,9 +85,12 @@ class SimRuntime:
             self._wall0, self._sim0 = wall_now, self.plant.t
         target = self._sim0 + (wall_now - self._wall0) * self.time_scale
         due = int(math.floor((target - self.plant.t) / TICK + 1e-9))
-        if due > MAX_TICKS_PER_CALL:
+        cap = max(1, round(MAX_LAG * self.time_scale / TICK))
+        if due > cap:
             self.overruns += 1
-            due = MAX_TICKS_PER_CALL
+            out = [self.step() for _ in range(cap)]
+            self._wall0, self._sim0 = wall_now, self.plant.t
+            return out
         return [self.step() for _ in range(max(due, 0))]
 
     def diagnostics(self) -> dict[str, str]:

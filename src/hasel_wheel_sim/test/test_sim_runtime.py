@@ -26,10 +26,13 @@ def test_scaled_time():
         rt.set_time_scale(0)
 
 
-def test_falling_behind_is_counted_not_hidden():
+def test_falling_behind_drops_the_backlog_and_is_counted():
     rt = SimRuntime()
     rt.run_until(0.0)
     assert len(rt.run_until(10.0)) == MAX_TICKS_PER_CALL and rt.overruns == 1
+    # from there on real time again: 10 ms later 3 ticks, not the 10 s left behind
+    assert len(rt.run_until(10.01)) == 3 and rt.overruns == 1
+    assert rt.plant.t == pytest.approx((MAX_TICKS_PER_CALL + 3) * TICK, abs=1e-9)
 
 
 @pytest.mark.parametrize("cmd, code, field", [
