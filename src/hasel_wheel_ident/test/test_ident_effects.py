@@ -141,8 +141,7 @@ def test_other_undeclared_effects_are_named_and_measured(effect, cid, truth, hal
         # interval says so (wider than the value itself) without contradicting the truth.
         assert v["rate"] == pytest.approx(0.1, rel=0.15)
         assert ci["rate"][0] < 0.1 < ci["rate"][1]
-        # its size grows with the three trials' speeds (k = +0.75, p = 0.03; ad hoc), so
-        # the search refitted it beside a force that builds up after each switch-on, where
+        # its size grows with the three trials' speeds, so the search refitted it beside a force that builds up after each switch-on, where
         # the right retention still holds
         lag = res.consistency[cid].beside_lag
         assert lag is not None and lag.holds() and lag.values["rate"] == pytest.approx(0.1,
@@ -403,8 +402,7 @@ def test_a_rise_lag_outside_the_library_on_short_trials_leaves_a_drift_along_spe
     assert res.diagnostics_after.trend.p_value < 1e-20
     # and nothing beside it: the force factors per actuator are tested beside the device
     # that takes up the most of the drift, here the switch-on lag (near the plant's 40 ms).
-    # Beside the HV-time loss they took up structure the lag left, and a signature along
-    # the actuator index was reported too (until a55e557)
+    # (beside the HV-time loss they would take up structure the lag leaves)
     devices = drift[0].devices
     assert devices["on_lag"]["value"] == pytest.approx(0.04, rel=0.1)
     assert devices["on_lag"]["sim_rmse_rad_s"] < 0.9 * devices["hv_loss"]["sim_rmse_rad_s"]
@@ -464,9 +462,8 @@ def test_retention_standing_in_for_a_rise_lag_outside_the_library_is_refused_bes
 
 
 def test_a_rise_lag_standing_in_for_weak_retention_is_refused_though_it_does_not_drift():
-    # retention of 0.05/s with its candidate left out, 3 x 34 s (plant seed 12): a 26 ms rise
-    # lag cut the held-out error (0.0354 -> 0.0263 rad/s, ad hoc, before the check) and was
-    # named.  It is one value through each drive, so no drift calls for the HV-time loss;
+    # retention of 0.05/s with its candidate left out, 3 x 34 s (plant seed 12): a rise lag
+    # cuts the held-out error and would be named.  It is one value through each drive, so no drift calls for the HV-time loss;
     # refitted beside it all the same (consistency.LOSS_LOOKALIKES) it is no longer needed
     # while the loss is significant: refused, nothing is named
     res = SEL.identify(_trials(_retention(0.05), seed=12), k_folds=3,
