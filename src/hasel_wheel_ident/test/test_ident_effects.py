@@ -141,8 +141,8 @@ def test_other_undeclared_effects_are_named_and_measured(effect, cid, truth, hal
         # interval says so (wider than the value itself) without contradicting the truth.
         assert v["rate"] == pytest.approx(0.1, rel=0.15)
         assert ci["rate"][0] < 0.1 < ci["rate"][1]
-        # its size grows with the three trials' speeds, so the search refitted it beside a force that builds up after each switch-on, where
-        # the right retention still holds
+        # its size grows with the three trials' speeds, so the search refitted it beside a
+        # force that builds up after each switch-on, where the right retention still holds
         lag = res.consistency[cid].beside_lag
         assert lag is not None and lag.holds() and lag.values["rate"] == pytest.approx(0.1,
                                                                                       rel=0.15)
