@@ -2,8 +2,9 @@
 disturbance estimator, the speed source), its YAML form and the ROS parameter files it maps to.
 
 The configuration is written into a bag as YAML (``<namespace>/controller.yaml`` in the bag's
-configuration) and read back by the replay.  Tests: ``test_controller.py`` (round trip,
-overrides, refusals).
+configuration) and read back by the replay.  Tests: ``test_replay.py``
+(``test_configuration_yaml_round_trip_and_errors``,
+``test_the_packaged_ros_parameter_files_are_the_core_defaults``).
 """
 from __future__ import annotations
 
