@@ -10,8 +10,10 @@ call it the same way, per device sample:
 2. :meth:`ControlCore.step` with the observer's estimate of that sample and the reference;
    it answers with a command to send, or None.
 
-Tests: ``hasel_wheel_mpc/test/test_core.py`` (start, step change, braking, estimator
-bookkeeping, without ROS) and ``test_controller.py`` (decision points).
+Tests, without ROS: ``test_core.py`` (the start policy; the node path's commands equal to the
+embedded runner's through a start, a step up and a braking step down) and
+``test_controller.py`` (decision points; a step down braked at the next switch-on with d
+unchanged across it).
 """
 from __future__ import annotations
 
