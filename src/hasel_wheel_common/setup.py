@@ -14,7 +14,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
     ],
     # lower bounds only, so that Ubuntu 24.04 / ROS 2 Jazzy system packages satisfy them
-    install_requires=['setuptools', 'numpy>=1.24', 'cobs>=1.1'],
+    install_requires=['setuptools', 'numpy>=1.24', 'PyYAML>=5.4', 'cobs>=1.1'],
     extras_require={'test': ['pytest']},
     zip_safe=False,
     maintainer="HASEL wheel developers",

@@ -67,7 +67,7 @@ class BagWriter:
     """Write messages (given as dicts) to a new rosbag2-layout MCAP bag.
 
     >>> with BagWriter("out/run1") as bag:                        # doctest: +SKIP
-    ...     bag.add_topic("/telemetry", "hasel_wheel_msgs/msg/WheelTelemetry", SENSOR)
+    ...     bag.add_topic("/telemetry", "hasel_wheel_msgs/msg/WheelTelemetry", STREAM)
     ...     bag.write("/telemetry", {...}, t_ns)
     """
 

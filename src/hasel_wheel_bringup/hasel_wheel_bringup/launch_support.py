@@ -2,6 +2,8 @@
 """
 from __future__ import annotations
 
+import shutil
+
 from launch.actions import (DeclareLaunchArgument, IncludeLaunchDescription, RegisterEventHandler,
                             Shutdown)
 from launch.event_handlers import OnProcessIO
@@ -34,6 +36,15 @@ def when_all_ready(nodes, actions) -> list:
             for i, n in enumerate(nodes)]
 
 
+def stops_with_launch(cmd: list[str]) -> list[str]:
+    """``cmd`` run so that it gets SIGINT when the launch process dies (``setpriv
+    --pdeathsig``, util-linux).  Jazzy's ``ros2 launch`` dies at once on SIGTERM and leaves
+    its processes running; our nodes notice that themselves
+    (:mod:`hasel_wheel_common.stop_request`), ``ros2 bag record``/``play`` would not, and an
+    orphaned recorder never closes its bag.  Without setpriv the command is returned as is."""
+    return ["setpriv", "--pdeathsig", "INT", "--", *cmd] if shutil.which("setpriv") else cmd
+
+
 def recording_arguments() -> list:
     """The ``record`` and ``bag_dir`` launch arguments (record.launch.py's)."""
     return [DeclareLaunchArgument("record", default_value="true",
@@ -43,18 +54,22 @@ def recording_arguments() -> list:
                                               "rosbag2_<date>_<time>)")]
 
 
-def include_recording(config_files: list[str]) -> IncludeLaunchDescription:
+def include_recording(config_files: list[str], namespaces: list) -> IncludeLaunchDescription:
     """record.launch.py with this launch's ``record`` and ``bag_dir``, keeping the files named
-    by the launch arguments ``config_files`` in the bag (an empty one is left out)."""
+    by the launch arguments ``config_files`` in the bag (an empty one is left out), with the
+    recorder's QoS for the wheels in ``namespaces`` (strings or substitutions)."""
     files: list = []                  # "a,b,c" as substitutions
     for name in config_files:
         files += [LaunchConfiguration(name), ","]
+    names: list = []                  # "wheel0,wheel1" as substitutions
+    for i, ns in enumerate(namespaces):
+        names += [","] * bool(i) + [ns]
     share = FindPackageShare("hasel_wheel_bringup")
     return IncludeLaunchDescription(
         PythonLaunchDescriptionSource(PathJoinSubstitution([share, "launch", "record.launch.py"])),
         launch_arguments={"record": LaunchConfiguration("record"),
                           "bag_dir": LaunchConfiguration("bag_dir"),
-                          "config_files": files}.items())
+                          "config_files": files, "namespaces": names}.items())
 
 
 def share_file_argument(name: str, package: str, filename: str,

@@ -46,12 +46,11 @@ def _wheels(context):
             launch_arguments={"namespace": ns, "port": port,
                               "params_file": LaunchConfiguration("driver_params_file")}.items())
         actions += [*when_all_ready([observer, mpc], [driver]), observer, mpc]
-    return actions
+    return [include_recording(["driver_params_file", "observer_params_file", "mpc_params_file",
+                               "controller_model_file"], [ns for ns, _ in wheels]), *actions]
 
 
 def generate_launch_description():
-    record = include_recording(["driver_params_file", "observer_params_file", "mpc_params_file",
-                                "controller_model_file"])
     return LaunchDescription([
         *recording_arguments(),
         DeclareLaunchArgument("namespace", default_value="wheel0",
@@ -67,6 +66,5 @@ def generate_launch_description():
                             "ROS parameter file of the driver"),
         controller_model_argument(),
         *controller_parameter_arguments(),
-        record,
         OpaqueFunction(function=_wheels),
     ])

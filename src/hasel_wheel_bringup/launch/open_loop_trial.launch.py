@@ -51,7 +51,7 @@ def _plant_and_trial(context):
         kept = ["trial_params_file", "driver_params_file"]
     wheel = IncludeLaunchDescription(PythonLaunchDescriptionSource(source),
                                      launch_arguments=arguments.items())
-    return [include_recording(kept), *when_all_ready([trial], [wheel]), trial]
+    return [include_recording(kept, [namespace]), *when_all_ready([trial], [wheel]), trial]
 
 
 def generate_launch_description():

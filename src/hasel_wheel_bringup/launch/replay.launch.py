@@ -25,7 +25,8 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
 from hasel_wheel_bringup.launch_support import (controller_parameter_arguments, include_recording,
-                                           recording_arguments, when_all_ready)
+                                           recording_arguments, stops_with_launch,
+                                           when_all_ready)
 
 def _play(context):
     """``ros2 bag play`` of the wheel's telemetry, reference, commands and decisions (the topic names
@@ -36,7 +37,7 @@ def _play(context):
            LaunchConfiguration("rate").perform(context), "--disable-keyboard-controls",
            "--topics", *(f"{prefix}/{name}" for name in ("telemetry", "reference_speed",
                                                          "command", "mpc_status"))]
-    return [ExecuteProcess(cmd=cmd, output="screen", name="bag_play",
+    return [ExecuteProcess(cmd=stops_with_launch(cmd), output="screen", name="bag_play",
                            on_exit=Shutdown(reason="the bag has been played"))]
 
 
@@ -49,7 +50,7 @@ def generate_launch_description():
                namespace=ns, output="screen", parameters=[LaunchConfiguration("mpc_params_file")],
                remappings=[("command", "replay/command"), ("mpc_status", "replay/mpc_status")])
     play = OpaqueFunction(function=_play)
-    record = include_recording(["observer_params_file", "mpc_params_file"])
+    record = include_recording(["observer_params_file", "mpc_params_file"], [ns])
     return LaunchDescription([
         DeclareLaunchArgument("bag", description="bag to play (directory or .mcap file)"),
         DeclareLaunchArgument("namespace", default_value="wheel0",

@@ -52,12 +52,11 @@ def _wheels(context):
                               "seed_offset": str(i),
                               "model_file": LaunchConfiguration("plant_model_file")}.items())
         actions += [*when_all_ready([observer, mpc], [sim]), observer, mpc]
-    return actions
+    return [include_recording(["observer_params_file", "mpc_params_file", "sim_params_file",
+                               "plant_file", "controller_model_file"], names), *actions]
 
 
 def generate_launch_description():
-    record = include_recording(["observer_params_file", "mpc_params_file", "sim_params_file",
-                                "plant_file", "controller_model_file"])
     return LaunchDescription([
         *recording_arguments(),
         DeclareLaunchArgument("namespace", default_value="wheel0",
@@ -73,6 +72,5 @@ def generate_launch_description():
                                           "pass plant_file:=.../plant.yaml: sensor/link "
                                           "effects only); '' = plant_file's effects"),
         *controller_parameter_arguments(),
-        record,
         OpaqueFunction(function=_wheels),
     ])

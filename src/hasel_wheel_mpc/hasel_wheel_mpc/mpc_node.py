@@ -9,7 +9,9 @@ so the node decides as the embedded runner does (``test_nodes.py``, ``test_core.
 The reference [rad/s] is the parameter ``reference_speed``; a std_msgs/Float64 on the topic
 ``reference_speed`` sets that parameter (same validation), so ``ros2 topic pub`` and
 ``ros2 param set`` both drive it and ``ros2 param get`` shows the one in use.  The node
-publishes the reference in use on that topic whenever it changes, so the bag has it.
+publishes the reference in use on that topic (latched) whenever it changes, and again to
+each subscriber that joins later (the recorder subscribes volatile), so a bag has every
+reference of the run.
 """
 from __future__ import annotations
 
@@ -42,6 +44,8 @@ from hasel_wheel_mpc.observer import estimate_from_msg
 CONFIG_PARAMS = MPC_PARAMS
 #: Parameters of the disturbance estimator (changeable at run time; d is kept).
 ESTIMATOR_PARAMS = ("estimator_gain", "estimator_mode", "estimator_gate")
+#: How often the node looks for new subscribers of ``reference_speed`` [s].
+REFERENCE_ANNOUNCE_PERIOD = 0.2
 
 
 class MpcNode(Node):
@@ -141,6 +145,7 @@ class MpcNode(Node):
                                         topics.REFERENCE))
         self.pub_cmd, self.pub_status, self.pub_diag, self.pub_ref = pubs.values()
         self.published_ref = math.nan
+        self.ref_subscribers = 0
         self.create_subscription(HybridStateEstimate, topics.STATE_ESTIMATE.name,
                                  self._on_estimate, qos_profile(topics.STATE_ESTIMATE.qos))
         self.create_subscription(WheelTelemetry, topics.TELEMETRY.name, self._on_telemetry,
@@ -152,6 +157,7 @@ class MpcNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
         self._publish_reference()
+        self.create_timer(REFERENCE_ANNOUNCE_PERIOD, self._announce_reference)
         self.create_timer(period, self._on_diagnostics)
         self.get_logger().info(
             f"ready: MPC, reference {self.reference:g} rad/s, {len(self.mpc.cands)} coarse "
@@ -204,6 +210,14 @@ class MpcNode(Node):
         if self.reference != self.published_ref:
             self.published_ref = self.reference
             self.pub_ref.publish(Float64(data=self.reference))
+
+    def _announce_reference(self) -> None:
+        """Publish the reference in use again when a subscriber has joined since the last
+        call: a volatile late joiner (the recorder) does not get the latched sample."""
+        count = self.pub_ref.get_subscription_count()
+        if count > self.ref_subscribers:
+            self.pub_ref.publish(Float64(data=self.reference))
+        self.ref_subscribers = count
 
     def _on_reference(self, msg: Float64) -> None:
         result = self.set_parameters([Parameter("reference_speed", Parameter.Type.DOUBLE,
