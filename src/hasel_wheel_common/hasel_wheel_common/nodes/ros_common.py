@@ -11,7 +11,11 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from hasel_wheel_common.stop_request import StopRequest, StopRequested
 from hasel_wheel_common.topics import QosSpec, Topic
+
+#: Longest wait for callbacks before the node loop checks for a stop request again [s].
+STOP_POLL = 0.1
 
 _RELIABILITY = {"reliable": ReliabilityPolicy.RELIABLE, "best_effort": ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {"volatile": DurabilityPolicy.VOLATILE,
@@ -95,39 +99,43 @@ def run_node(factory: Any, name: str, args: Any = None) -> None:
     """The Jazzy demos' ``main()`` (demo_nodes_py talker.py), shared by every node.
 
     Build the node (a bad parameter or file exits with status 2 and the reason), spin until
-    Ctrl-C or an external shutdown (or, for a node with a ``finished`` future, until that
-    completes), then destroy the node and shut rclpy down.  A second SIGINT during clean-up
-    (a terminal's Ctrl-C plus the one ``ros2 launch`` forwards) is ignored, so
-    ``destroy_node`` still runs to the end once.
+    a stop request (:mod:`hasel_wheel_common.stop_request`: SIGINT, SIGTERM, or the parent
+    process gone), an external shutdown, or, for a node with a ``finished`` future, its
+    completion; then destroy the node, shut rclpy down and return (exit status 0).  rclpy's
+    own signal handlers are not installed: the process handles its signals, so a second
+    SIGINT during clean-up finds nothing half torn down.  Tests:
+    ``test_stop_request.py`` (the requests) and ``docs/ros2.md`` (the four ways to stop a
+    launch, run on Jazzy).
     """
     import rclpy
     from rclpy.exceptions import ParameterException
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
-    rclpy.init(args=args)
+    stop = StopRequest()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     try:
         node = factory()
     except (ValueError, ParameterException) as exc:   # ParameterError and rclpy's own checks
         print(f"{name}: {exc}")                       # (type, range): name the field and range
         rclpy.try_shutdown()
         raise SystemExit(2)
-    try:
-        finished = getattr(node, "finished", None)
-        if finished is None:
-            rclpy.spin(node)
-        else:
-            rclpy.spin_until_future_complete(node, finished)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except RuntimeError:
-        # rclpy's RCLError "failed to initialize wait set: the given context is not valid":
-        # SIGINT's handler shut the context down while the executor was building its wait set
-        # (a known race, ros2/ros2cli#854).  That is the shutdown asked for; anything else is not.
-        if rclpy.ok():
-            raise
-    finally:
-        try:
-            node.destroy_node()
-        except KeyboardInterrupt:
-            pass
+    except StopRequested:
         rclpy.try_shutdown()
+        stop.finish()
+        return
+    stop.arm()
+    finished = getattr(node, "finished", None)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while not (stop.stopped() or (finished is not None and finished.done())):
+            executor.spin_once(timeout_sec=STOP_POLL)
+    except ExternalShutdownException:
+        pass
+    if stop.reason is not None:
+        node.get_logger().info(f"stopping: {stop.reason}")
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown()
+    stop.finish()
