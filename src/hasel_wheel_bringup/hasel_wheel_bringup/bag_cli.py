@@ -79,6 +79,23 @@ def cmd_metrics(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_completeness(args: argparse.Namespace) -> int:
+    """Print, per wheel, whether the bag holds every telemetry sample its device published;
+    exit 1 when samples are missing or no wheel could be checked."""
+    from hasel_wheel_bringup.bag_completeness import bag_completeness
+    try:
+        wheels = bag_completeness(args.bag)
+    except BagError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(_json([asdict(w) | {"missing": w.missing} for w in wheels]), indent=1))
+    else:
+        for w in wheels:
+            print(w.text())
+    return 0 if wheels and all(w.missing == 0 for w in wheels) else 1
+
+
 def cmd_observer(args: argparse.Namespace) -> int:
     """Print the observer's speed error against the simulator's true speed."""
     from hasel_wheel_bringup.observer_error import observer_error
@@ -148,14 +165,16 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub) -> None:
-    """Add ``bag`` (``info``, ``metrics``, ``plot``, ``export``, ``replay``) to the ``hasel_wheel`` sub-command parser."""
-    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, observer, "
-                                    "plot, export, replay)")
+    """Add ``bag`` (``info``, ``metrics``, ``completeness``, ``observer``, ``plot``, ``export``,
+    ``replay``) to the ``hasel_wheel`` sub-command parser."""
+    b = sub.add_parser("bag", help="offline tools on recorded bags (info, metrics, completeness, "
+                                    "observer, plot, export, replay)")
     add_tools(b.add_subparsers(dest="bag_command", required=True))
 
 
 def add_tools(tools) -> None:
-    """Add the tools (``info``, ``metrics``, ``plot``, ``export``, ``replay``) to a sub-command parser."""
+    """Add the tools (``info``, ``metrics``, ``completeness``, ``observer``, ``plot``, ``export``,
+    ``replay``) to a sub-command parser."""
     i = tools.add_parser("info", help="topics, counts, rates, gaps, duration, configuration")
     i.add_argument("bag", help="bag directory or .mcap file")
     i.add_argument("--json", action="store_true", help="print JSON instead of text")
@@ -167,6 +186,11 @@ def add_tools(tools) -> None:
                    help="[s] steady window at the end of each segment (default 10)")
     m.add_argument("--json", action="store_true", help="print JSON instead of text")
     m.set_defaults(func=cmd_metrics)
+    c = tools.add_parser("completeness", help="per wheel: the telemetry recorded against the "
+                                              "count the device node reported publishing")
+    c.add_argument("bag", help="bag directory or .mcap file")
+    c.add_argument("--json", action="store_true", help="print JSON instead of text")
+    c.set_defaults(func=cmd_completeness)
     o = tools.add_parser("observer", help="the observer's speed error against the simulator's "
                                           "true speed, estimates paired by stamp")
     o.add_argument("bag", help="bag with state_estimate (directory or .mcap file)")

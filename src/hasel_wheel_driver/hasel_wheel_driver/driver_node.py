@@ -18,6 +18,7 @@ from sensor_msgs.msg import JointState
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
+from hasel_wheel_common.published_count import PublishedCount
 from hasel_wheel_driver.link import DriverCore, LinkConfig
 from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param,
                                                  publish_status, qos_profile, run_node,
@@ -50,6 +51,7 @@ class DriverNode(Node):
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0, True)).value
         self.frame_id = self.get_parameter("frame_id").value
         self.commands_refused = 0
+        self.published = PublishedCount()     # telemetry samples published (diagnostics)
 
         pubs = create_publishers(self, (topics.TELEMETRY, topics.JOINT_STATES, topics.DIAGNOSTICS))
         self.pub_tlm, self.pub_js, self.pub_diag = pubs.values()
@@ -83,6 +85,7 @@ class DriverNode(Node):
             return
         host = s._replace(t=self.get_clock().now().nanoseconds * 1e-9)
         self.pub_tlm.publish(fill(WheelTelemetry(), samples.telemetry_msg(host, self.frame_id)))
+        self.published.count(s.sequence)
         self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
 
     def _on_event(self, event: str) -> None:
@@ -99,6 +102,7 @@ class DriverNode(Node):
     def _on_diagnostics(self) -> None:
         d = self.core.diagnostics()
         d["commands_refused"] = str(self.commands_refused)
+        d.update(self.published.diagnostics())
         ok = self.core.connected and not self.core.stale
         level = DiagnosticStatus.OK[0] if ok else DiagnosticStatus.ERROR[0]
         publish_status(self, self.pub_diag, "serial link", self.core.config.port, level,

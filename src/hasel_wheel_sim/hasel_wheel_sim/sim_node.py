@@ -27,6 +27,7 @@ from sensor_msgs.msg import JointState
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
+from hasel_wheel_common.published_count import PublishedCount
 from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param,
                                                  publish_status, qos_profile, run_node,
                                                  int_param, text_param)
@@ -82,6 +83,7 @@ class SimNode(Node):
         self.started = False
         self.created = time.monotonic()
         self.published = 0                     # telemetry samples in this diagnostics window
+        self.published_total = PublishedCount()
         self.window_t0 = self.created
         self.create_timer(0.01, self._on_tick)
         self.create_timer(self.get_parameter("diagnostics_period").value, self._on_diagnostics)
@@ -139,6 +141,7 @@ class SimNode(Node):
                 host = s._replace(t=self._stamp_time(s.t))
                 self.pub_tlm.publish(fill(WheelTelemetry(), samples.telemetry_msg(host, self.frame_id)))
                 self.published += 1
+                self.published_total.count(s.sequence)
                 self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
             x = out.truth
             self.pub_truth.publish(fill(HybridStateEstimate(), samples.state_msg(
@@ -148,6 +151,7 @@ class SimNode(Node):
         now = time.monotonic()
         d = self.core.diagnostics()
         d["telemetry_rate_hz"] = f"{self.published / max(now - self.window_t0, 1e-9):.1f}"
+        d.update(self.published_total.diagnostics())
         d["started"] = str(self.started)
         self.published, self.window_t0 = 0, now
         if not self.started:
