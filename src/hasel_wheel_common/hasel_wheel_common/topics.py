@@ -33,7 +33,6 @@ class QosSpec:
                 "liveliness": "automatic", "liveliness_lease_duration": dict(inf),
                 "avoid_ros_namespace_conventions": False}
 
-
     def compatible_with(self, offered: QosSpec) -> bool:
         """True if a reader with this profile matches a writer offering ``offered`` (DDS
         request/offer rules: a reliable reader needs a reliable writer, a transient-local

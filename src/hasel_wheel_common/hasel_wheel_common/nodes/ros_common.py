@@ -103,9 +103,9 @@ def run_node(factory: Any, name: str, args: Any = None) -> None:
     process gone), an external shutdown, or, for a node with a ``finished`` future, its
     completion; then destroy the node, shut rclpy down and return (exit status 0).  rclpy's
     own signal handlers are not installed: the process handles its signals, so a second
-    SIGINT during clean-up finds nothing half torn down.  Tests:
-    ``test_stop_request.py`` (the requests) and ``docs/ros2.md`` (the four ways to stop a
-    launch, run on Jazzy).
+    SIGINT during clean-up finds nothing half torn down.  Tests: ``test_stop_request.py``
+    (the requests, without ROS) and ``test_launch_stops.py`` (every way of stopping a launch,
+    on ROS 2).
     """
     import rclpy
     from rclpy.exceptions import ParameterException
