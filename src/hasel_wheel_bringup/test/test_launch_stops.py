@@ -40,7 +40,7 @@ def test_every_process_of_the_loop_ends_cleanly(way, tmp_path):
     assert r["started"], "the wheel never started"
     assert r["launch_status"] == 0
     assert r["processes"] == SIM_LOOP
-    assert r["ended"] == {name: ("has finished cleanly", 0) for name in SIM_LOOP}
+    assert r["ended"] == {name: ["has finished cleanly", 0] for name in SIM_LOOP}
     assert r["error_lines"] == []
     assert _closed(tmp_path / "bag")
 
@@ -86,6 +86,6 @@ def test_a_launch_that_ends_itself_ends_every_process_cleanly(tmp_path):
               f"bag_dir:={tmp_path / 'replayed'}")
     names = ["bag_play-4", "bag_record-1", "mpc_node-3", "observer_node-2"]
     assert r["launch_status"] == 0 and r["processes"] == names
-    assert r["ended"] == {name: ("has finished cleanly", 0) for name in names}
+    assert r["ended"] == {name: ["has finished cleanly", 0] for name in names}
     assert r["error_lines"] == []
     assert _closed(tmp_path / "replayed")
