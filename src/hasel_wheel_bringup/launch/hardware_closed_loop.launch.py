@@ -16,6 +16,7 @@ MPC's parameter files in the bag's custom data; record:=false turns recording of
 """
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
+from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.substitutions import FindPackageShare
@@ -28,7 +29,8 @@ from hasel_wheel_bringup.launch_support import (controller_model_argument, contr
 
 def _wheels(context):
     """Each wheel's driver, observer and MPC: one wheel on ``port`` under ``namespace``, or
-    one per entry of ``ports`` (comma-separated) under wheel0, wheel1, ..."""
+    one per entry of ``ports`` (comma-separated) under wheel0, wheel1, ...; each driver
+    opens its link once the observer, the MPC and (when recording) the recorder listen."""
     ports = [p.strip() for p in LaunchConfiguration("ports").perform(context).split(",")
              if p.strip()]
     if len(set(ports)) != len(ports):
@@ -38,13 +40,15 @@ def _wheels(context):
               [(f"wheel{i}", port) for i, port in enumerate(ports)])
     driver_launch = PathJoinSubstitution([FindPackageShare("hasel_wheel_driver"), "launch",
                                           "driver.launch.py"])
+    listeners = str(2 + IfCondition(LaunchConfiguration("record")).evaluate(context))
     actions = []
     for ns, port in wheels:
         observer, mpc = controller_nodes(ns)
         driver = IncludeLaunchDescription(
             PythonLaunchDescriptionSource(driver_launch),
             launch_arguments={"namespace": ns, "port": port,
-                              "params_file": LaunchConfiguration("driver_params_file")}.items())
+                              "params_file": LaunchConfiguration("driver_params_file"),
+                              "telemetry_subscribers": listeners}.items())
         actions += [*when_all_ready([observer, mpc], [driver]), observer, mpc]
     return [include_recording(["driver_params_file", "observer_params_file", "mpc_params_file",
                                "controller_model_file"], [ns for ns, _ in wheels]), *actions]

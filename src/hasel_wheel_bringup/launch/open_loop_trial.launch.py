@@ -16,6 +16,7 @@ file and the plant's (plant_file for the sim, the driver's parameter file for ha
 """
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction, Shutdown
+from launch.conditions import IfCondition
 from launch.launch_description_sources import PythonLaunchDescriptionSource
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
@@ -46,8 +47,10 @@ def _plant_and_trial(context):
     else:
         source = PathJoinSubstitution([FindPackageShare("hasel_wheel_driver"), "launch",
                                        "driver.launch.py"])
+        listeners = 1 + IfCondition(LaunchConfiguration("record")).evaluate(context)
         arguments = {"namespace": namespace, "port": LaunchConfiguration("port"),
-                     "params_file": LaunchConfiguration("driver_params_file")}
+                     "params_file": LaunchConfiguration("driver_params_file"),
+                     "telemetry_subscribers": str(listeners)}     # trial node, recorder
         kept = ["trial_params_file", "driver_params_file"]
     wheel = IncludeLaunchDescription(PythonLaunchDescriptionSource(source),
                                      launch_arguments=arguments.items())

@@ -3,11 +3,15 @@
 Publishes ``telemetry``, ``joint_states`` and ``/diagnostics``; forwards ``command`` after
 validating it.  Serial I/O runs in the driver core's own thread, so the executor never waits
 on the port.  HV: off until ``hv_enabled`` is set true; off again on shutdown (SIGINT/SIGTERM),
-on a stale or lost link, and whenever the device's watchdog trips.
+on a stale or lost link, and whenever the device's watchdog trips.  The serial link opens
+once ``telemetry_subscribers`` subscriptions match ``telemetry`` (or after
+``subscriber_timeout``), so the recorder gets the first sample too
+(:mod:`hasel_wheel_driver.link_start`).
 """
 from __future__ import annotations
 
 import sys
+import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from hasel_wheel_msgs.msg import ActuationCommand, WheelTelemetry
@@ -20,9 +24,14 @@ from hasel_wheel_common import samples
 from hasel_wheel_common import topics
 from hasel_wheel_common.published_count import PublishedCount
 from hasel_wheel_driver.link import DriverCore, LinkConfig
+from hasel_wheel_driver.link_start import link_may_start
 from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param,
-                                                 publish_status, qos_profile, run_node,
-                                                 text_param)
+                                                 int_param, publish_status, qos_profile,
+                                                 run_node, text_param)
+
+
+#: How often the node checks whether its link may open [s].
+LINK_START_POLL = 0.05
 
 
 class DriverNode(Node):
@@ -50,6 +59,15 @@ class DriverNode(Node):
         period = self.declare_parameter(
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0, True)).value
         self.frame_id = self.get_parameter("frame_id").value
+        self.telemetry_subscribers = self.declare_parameter(
+            "telemetry_subscribers", 0,
+            int_param("open the serial link once this many subscriptions listen to telemetry "
+                      "(the launch files count the observer, the MPC and the recorder) [count]; "
+                      "0 = at once", 0, 64, True)).value
+        self.subscriber_timeout = self.declare_parameter(
+            "subscriber_timeout", 5.0,
+            float_param("open the link after this long even without them [s]", 0.0, 60.0,
+                        True)).value
         self.commands_refused = 0
         self.published = PublishedCount()     # telemetry samples published (diagnostics)
 
@@ -62,8 +80,26 @@ class DriverNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
         self.create_timer(period, self._on_diagnostics)
+        self.created = time.monotonic()
+        self.link_timer = self.create_timer(LINK_START_POLL, self._start_link)
+        self.get_logger().info(f"serial link on {port} once {self.telemetry_subscribers} "
+                               f"subscribers listen to telemetry; HV stays off until "
+                               f"hv_enabled is true")
+
+    def _start_link(self) -> None:
+        """Open the serial link once the telemetry has its listeners (or on timeout)."""
+        matched = self.pub_tlm.get_subscription_count()
+        waited = time.monotonic() - self.created
+        if not link_may_start(matched, self.telemetry_subscribers, waited,
+                              self.subscriber_timeout):
+            return
+        self.destroy_timer(self.link_timer)
+        if matched < self.telemetry_subscribers:
+            self.get_logger().warn(f"opening the serial link with {matched} of "
+                                   f"{self.telemetry_subscribers} telemetry subscribers after "
+                                   f"{waited:.1f} s (subscriber_timeout): the others miss the "
+                                   f"first samples")
         self.core.start()
-        self.get_logger().info(f"serial link on {port}; HV stays off until hv_enabled is true")
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         for p in params:

@@ -3,6 +3,7 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, Shutdown
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
 
 
@@ -16,8 +17,14 @@ def generate_launch_description():
         DeclareLaunchArgument("params_file",
                               default_value=PathJoinSubstitution([share, "config", "driver_node.yaml"]),
                               description="ROS parameter file of driver_node"),
+        DeclareLaunchArgument("telemetry_subscribers", default_value="0",
+                              description="open the serial link once this many subscriptions "
+                                          "listen to telemetry (0 = at once)"),
         Node(package="hasel_wheel_driver", executable="driver_node", name="driver",
              namespace=LaunchConfiguration("namespace"), output="screen",
              on_exit=Shutdown(reason="the driver exited"),   # no controller left without it
-             parameters=[LaunchConfiguration("params_file"), {"port": LaunchConfiguration("port")}]),
+             parameters=[LaunchConfiguration("params_file"),
+                         {"port": LaunchConfiguration("port"),
+                          "telemetry_subscribers": ParameterValue(
+                              LaunchConfiguration("telemetry_subscribers"), value_type=int)}]),
     ])
