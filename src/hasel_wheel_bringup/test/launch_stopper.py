@@ -30,7 +30,7 @@ import time
 PR_SET_CHILD_SUBREAPER = 36
 STARTED = re.compile(r"\[INFO\] \[([^\]]+)\]: process started with pid \[(\d+)\]")
 ENDED = re.compile(r"\[(?:INFO|ERROR)\] \[([^\]]+)\]: process (has finished cleanly|has died)"
-                   r"[^\n]*?(?:exit code (-?\d+))?")
+                   r"(?:[^\n]*?exit code (-?\d+))?")
 
 
 class Launch:
