@@ -114,6 +114,17 @@ class _Fields:
         self.__dict__.update(d)
 
 
+def from_device(m: Any) -> TelemetrySample:
+    """The sample of a device TELEMETRY message (``protocol.Telemetry``): the device clock
+    as ``t`` [s], the unwrapped encoder count as ``angle`` [rad]."""
+    return TelemetrySample(
+        t=m.device_time_us * 1e-6, device_time_us=m.device_time_us, sequence=m.sample_seq,
+        encoder_raw=m.encoder_raw, angle=m.encoder_unwrapped * ENCODER_COUNT, q=m.q, eta=m.eta,
+        eta_unwrapped=m.eta_unwrapped, active_mask=m.active_mask, hv_monitor=m.hv_monitor,
+        current_monitor=m.current_monitor, last_command_sequence=m.last_command_seq,
+        fault_flags=m.fault_flags)
+
+
 def as_received(s: TelemetrySample) -> TelemetrySample:
     """``s`` as a node receives it through a WheelTelemetry message: the device clock as
     ``t`` and the monitors as float32.  The embedded runner's controller sees this, so a

@@ -18,8 +18,7 @@ from typing import Callable
 import serial
 
 from hasel_wheel_common import protocol as P
-from hasel_wheel_common.samples import ENCODER_COUNT as COUNT
-from hasel_wheel_common.samples import Command, TelemetrySample
+from hasel_wheel_common.samples import Command, TelemetrySample, from_device
 
 
 class RefusalCode(IntEnum):
@@ -348,13 +347,7 @@ class DriverCore:
                 if t_rx - self._rate_t0 >= 1.0:
                     self.frame_rate = (self.stats.samples - self._rate_n0) / (t_rx - self._rate_t0)
                     self._rate_t0, self._rate_n0 = t_rx, self.stats.samples
-                sample = TelemetrySample(
-                    t=m.device_time_us * 1e-6, device_time_us=m.device_time_us,
-                    sequence=m.sample_seq, encoder_raw=m.encoder_raw,
-                    angle=m.encoder_unwrapped * COUNT, q=m.q, eta=m.eta,
-                    eta_unwrapped=m.eta_unwrapped, active_mask=m.active_mask,
-                    hv_monitor=m.hv_monitor, current_monitor=m.current_monitor,
-                    last_command_sequence=m.last_command_seq, fault_flags=m.fault_flags)
+                sample = from_device(m)
                 try:  # a failing consumer must not stop the link (heartbeats, acks)
                     self.on_sample(sample)
                 except Exception as exc:  # noqa: BLE001 - reported, counted, link continues

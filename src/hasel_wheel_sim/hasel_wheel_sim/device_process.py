@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.device_cpp import CppDeviceCore, load_library
 from hasel_wheel_sim.firmware import Firmware
 from hasel_wheel_sim.params import WheelParams
 from hasel_wheel_sim.plant import Plant, PlantConfig
@@ -38,8 +39,9 @@ class DeviceReport:
     watchdog_trips: int = 0         # times the device's watchdog switched HV off
 
 
-def _device_main(conn, plant_config, params, w0, link, time_scale, faults) -> None:
-    vt = VirtualTeensy(Firmware(Plant(params, plant_config, xi2=w0)), link, time_scale, faults)
+def _device_main(conn, plant_config, params, w0, link, time_scale, faults, core_build) -> None:
+    core = CppDeviceCore(load_library(core_build)) if core_build else None
+    vt = VirtualTeensy(Firmware(Plant(params, plant_config, xi2=w0), core), link, time_scale, faults)
     # Compile (or load) the core first, then move every object alive now out of the garbage
     # collector's reach: a compile leaves enough objects that a full collection would pause
     # the device for longer than the host's link timeout at scaled time.  A Teensy has no
@@ -85,9 +87,11 @@ class DeviceProcess:
 
     def __init__(self, link: str | os.PathLike, plant_config: PlantConfig | None = None,
                  params: WheelParams | None = None, w0: float = 0.0, time_scale: float = 1.0,
-                 faults: LinkFaults | None = None) -> None:
+                 faults: LinkFaults | None = None, core_build: str | os.PathLike | None = None) -> None:
         """Start the device at wheel speed ``w0`` [rad/s] and ``time_scale`` x real time, its
-        pty published at ``link``; returns once the link exists."""
+        pty published at ``link``; returns once the link exists.  ``core_build``: a directory
+        from :func:`~.device_cpp.build_core`, to run the C++ firmware core instead of the
+        Python :class:`~.device_core.DeviceCore`."""
         import multiprocessing as mp
 
         ctx = mp.get_context("spawn")
@@ -95,7 +99,8 @@ class DeviceProcess:
         self.link = Path(link)
         self._proc = ctx.Process(target=_device_main, daemon=True,
                                  args=(child, plant_config or PlantConfig(switching="tick"), params,
-                                       w0, str(link), time_scale, faults))
+                                       w0, str(link), time_scale, faults,
+                                       str(core_build) if core_build else None))
         self._proc.start()
         t_end = time.monotonic() + self.START_TIMEOUT
         while not self.link.is_symlink():      # the child compiles and plugs in

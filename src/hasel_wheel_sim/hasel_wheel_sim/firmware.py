@@ -1,124 +1,104 @@
-"""The virtual Teensy's firmware: the device rules of ``docs/protocol.md`` section 4 around a
-:class:`~.plant.Plant` in tick-switching mode (pure, no I/O).
+"""The virtual Teensy's board: a device core wired to a :class:`~.plant.Plant` (pure, no I/O).
 
-HV interlock, command latching at switch-off, tick-sampled switching, watchdog, maximum
-on-time, emergency stop.  :mod:`.pty_device` serves it on a pseudo-terminal;
-``test_firmware.py`` holds the rules.
+At every tick the board reads the plant's encoder (its raw 10-bit reading, noise and glitches
+included) and its HV and current monitors, hands them to the device core, and applies what
+the core decides (which pad gets HV) to the wheel for the tick's physics.  The core is the
+Python reference (:class:`~.device_core.DeviceCore`) or the C++ firmware core built for the
+host (:class:`~.device_cpp.CppDeviceCore`); either decides switching from its own readings,
+as the Teensy does.  :mod:`.pty_device` serves a board on a pseudo-terminal;
+``test_firmware.py`` holds the board, ``test_device_rules.py`` the device rules.
 """
 from __future__ import annotations
 
-import math
+from typing import Protocol
 
 from hasel_wheel_common import protocol as P
 
 from hasel_wheel_sim import layout as L
-from hasel_wheel_sim.model import SECTOR, angle_reading
-from hasel_wheel_sim.plant import COUNT, Plant
+from hasel_wheel_sim.device_core import DeviceCore, DeviceState, Outputs, Sensors
+from hasel_wheel_sim.plant import ACTUATOR_CURRENT_A, HV_SUPPLY_V, Plant
+
+
+class Core(Protocol):
+    """What a board needs of a device core (:class:`DeviceCore` and ``CppDeviceCore``)."""
+
+    def reset(self) -> None: ...
+    def receive(self, data: bytes) -> int: ...
+    def tick(self, now_us: int, sensors: Sensors) -> tuple[list[bytes], Outputs]: ...
+    def state(self) -> DeviceState: ...
 
 
 class Firmware:
-    """Device behaviour (protocol section 4) around a :class:`Plant` in tick-switching mode."""
+    """A device core (default: :class:`DeviceCore`) driving a :class:`Plant`'s wheel."""
 
-    def __init__(self, plant: Plant) -> None:
-        if plant.config.switching != "tick":
-            raise ValueError("the firmware switches on ticks: build the plant with switching='tick'")
+    def __init__(self, plant: Plant, core: Core | None = None) -> None:
         self.plant = plant
+        self.core = core or DeviceCore()
         self.reset()
 
     def reset(self) -> None:
-        """Power-up state: HV off, nothing latched, estop clear, default configuration."""
+        """Power-up: the core restarts (HV off, nothing latched), every pad is off."""
+        self.core.reset()
         self.plant.wheel.cut_hv()
-        self.config = P.Config()
-        self.hv_enabled = False
-        self.estop = False
-        self.faults = 0
-        self.counter = 0
-        self.sample_seq = 0
-        self.last_host_t = self.plant.t
-        self.watchdog_trips = 0
-        self.hv_off_t: float | None = None  # simulated time HV was last switched off
+        self.plant.wheel.drive(None)
+        self.outputs = Outputs()
+        self.state = self.core.state()
+        self.watchdog_trips = 0                 # times the device's watchdog switched HV off
+        self.hv_off_t: float | None = None      # simulated time HV was last switched off [s]
 
-    # -- host frames --------------------------------------------------------------------
-    def receive(self, frame: P.Frame) -> P.Message:
-        """Handle one valid host frame; return the ACK or REJECT to send."""
-        self.last_host_t = self.plant.t
-        m = frame.message
-        seq = m.command_seq if isinstance(m, P.Command) else 0
+    @property
+    def hv_enabled(self) -> bool:
+        return self.state.hv_enabled
 
-        def reject(reason: int) -> P.Reject:
-            if isinstance(m, P.Command):
-                self.faults |= P.F_REJECTED
-            return P.Reject(frame.type, frame.counter, seq, reason)
+    @property
+    def estop(self) -> bool:
+        return self.state.estop
 
-        if isinstance(m, P.Command):
-            reason = P.check_command(m.n_a, m.phi_a, m.phi_d)
-            if reason:
-                return reject(reason)
-            if self.estop:
-                return reject(P.R_ESTOP)
-            if not self.hv_enabled:
-                return reject(P.R_HV_DISABLED)
-            # float32 angles may exceed pi/8 by a rounding step: clamp into the range
-            pa = min(max(float(m.phi_a), -SECTOR), SECTOR)
-            pd = min(max(float(m.phi_d), -SECTOR), SECTOR)
-            self.plant.wheel.command(m.n_a, pa, pd, m.command_seq)
-            self.faults &= ~(P.F_REJECTED | P.F_MAX_ON)
-        elif isinstance(m, P.Hv):
-            if m.enable:
-                if self.estop:
-                    return reject(P.R_ESTOP)
-                self.hv_enabled = True
-                self.faults &= ~P.F_WATCHDOG
-            else:
-                self.hv_off()
-        elif isinstance(m, P.Estop):
-            self.hv_off()
-            self.estop = True
-            self.faults |= P.F_ESTOP
-        elif isinstance(m, P.ClearEstop):
-            self.estop = False
-            self.faults &= ~P.F_ESTOP
-        elif isinstance(m, P.Config):
-            if P.check_config(m):
-                return reject(P.R_CONFIG)
-            self.config = m
-        return P.Ack(frame.type, frame.counter, seq)
+    @property
+    def faults(self) -> int:
+        return self.state.faults
 
-    def hv_off(self) -> None:
-        """Switch HV off now (disabled until a host HV enable) and note when."""
-        if self.hv_enabled or self.plant.wheel.s[L.S_Q]:
-            self.hv_off_t = self.plant.t
-        self.hv_enabled = False
-        self.plant.wheel.cut_hv()
+    @property
+    def tick_period(self) -> float:
+        """Seconds to the next tick at the configured telemetry rate."""
+        return 1.0 / self.outputs.telemetry_rate_hz
 
-    # -- ticks --------------------------------------------------------------------------
-    def tick(self) -> P.Telemetry:
-        """One firmware tick: watchdog, maximum on-time, physics, then the telemetry sample."""
-        c = self.config
-        if self.hv_enabled and self.plant.t - self.last_host_t >= c.watchdog_ms / 1000.0 - 1e-9:
-            self.hv_off()
-            self.faults |= P.F_WATCHDOG
+    def receive(self, data: bytes) -> int:
+        """Host bytes for the next tick; returns how many the device took."""
+        return self.core.receive(data)
+
+    def sensors(self) -> Sensors:
+        """What the board reads now: the encoder, and the monitors of what it drove."""
+        out = self.outputs
+        return Sensors(self.plant.encoder_raw, True, HV_SUPPLY_V if out.hv_supply else 0.0,
+                       ACTUATOR_CURRENT_A if out.active_mask else 0.0)
+
+    def tick(self, sensors: Sensors | None = None) -> list[bytes]:
+        """One tick: the core decides on ``sensors`` (default :meth:`sensors`), the wheel
+        gets HV as decided for one tick period; returns the frames the device sent."""
+        frames, out = self.core.tick(int(round(self.plant.t * 1e6)), sensors or self.sensors())
+        before = self.state
+        self.state = st = self.core.state()
+        self.outputs = out
+        if st.faults & P.F_WATCHDOG and not before.faults & P.F_WATCHDOG:
             self.watchdog_trips += 1
-        s = self.plant.wheel.s
-        if s[L.S_Q] and s[L.S_ON_TIME] >= c.max_on_ms / 1000.0:
-            self.plant.wheel.cut_hv()
-            self.faults |= P.F_MAX_ON
-        sample = self.plant.step(None, 1.0 / c.telemetry_rate_hz)
-        self.sample_seq += 1
-        xi1 = s[L.S_XI1]
-        q = int(s[L.S_Q])
-        eta_u = int(s[L.S_ETA])
-        # a lost sample (plant dropout): the firmware still reads its sensor
-        angle = sample.angle if sample is not None else angle_reading(xi1, self.plant.wheel.pv)
-        return P.Telemetry(
-            device_time_us=int(round(self.plant.t * 1e6)), sample_seq=self.sample_seq,
-            encoder_raw=int(math.floor(angle / COUNT)) % 1024,
-            encoder_unwrapped=int(math.floor(angle / COUNT)), q=q, eta=eta_u % 16,
-            eta_unwrapped=eta_u, active_mask=(1 << (eta_u % 16)) if q else 0,
-            hv_monitor=9000.0 if self.hv_enabled else 0.0, current_monitor=3e-4 if q else 0.0,
-            last_command_seq=max(int(s[L.S_CMD_SEQ]), 0), fault_flags=self.faults)
+        if before.hv_enabled and not st.hv_enabled:
+            self.hv_off_t = self.plant.t
+        wheel = self.plant.wheel
+        if out.active_mask:
+            wheel.drive(st.eta_unwrapped, st.target.phi_a, st.target.seq)
+        else:
+            wheel.drive(None)
+        self.plant.step(None, self.tick_period)
+        return frames
 
-    def next_counter(self) -> int:
-        """The frame counter of the next frame the device sends (16 bits, wraps)."""
-        self.counter = (self.counter + 1) & 0xFFFF
-        return self.counter
+    def cut_power(self) -> None:
+        """The board loses power: every pad off, the wheel coasts for one tick period."""
+        self.plant.wheel.drive(None)
+        self.outputs = Outputs()
+        self.plant.step(None, self.tick_period)
+
+    @property
+    def speed(self) -> float:
+        """The wheel's true speed [rad/s]."""
+        return float(self.plant.wheel.s[L.S_XI2])

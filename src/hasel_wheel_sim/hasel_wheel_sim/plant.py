@@ -154,6 +154,9 @@ class Plant:
         self._p_drop = fx.get("dropouts", "probability")
         self._commands: deque[tuple[float, Command]] = deque()
         self._samples: deque[TelemetrySample | None] = deque()
+        #: The encoder's raw reading (0..1023, noise and glitches included) at the last tick,
+        #: or at the initial angle before the first; what a device reads (:mod:`.firmware`).
+        self.encoder_raw = math.floor(angle_reading(xi1, self.wheel.pv) / COUNT) % ENCODER_COUNTS
 
     @property
     def t(self) -> float:
@@ -198,6 +201,7 @@ class Plant:
             glitch_count = int(u_glitch / self._p_glitch * ENCODER_COUNTS)  # uniform 0..1023
             angle += (glitch_count - raw) * COUNT
             raw = glitch_count
+        self.encoder_raw = int(raw)
         if u_drop < self._p_drop:
             return None
         q = int(s[L.S_Q])

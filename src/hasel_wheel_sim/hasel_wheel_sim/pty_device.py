@@ -1,5 +1,5 @@
-"""The virtual Teensy on a pseudo-terminal: :class:`~.firmware.Firmware` run at 300 Hz (real
-or scaled time) behind a pty published under a stable symlink like ``/dev/serial/by-id/...``,
+"""The virtual Teensy on a pseudo-terminal: a :class:`~.firmware.Firmware` board run at 300 Hz
+(real or scaled time) behind a pty published under a stable symlink like ``/dev/serial/by-id/...``,
 speaking protocol v1, with link faults injected on demand: byte corruption, dropped bytes,
 stalls and unplug/replug.
 
@@ -96,6 +96,9 @@ class VirtualTeensy:
         self._txq = bytearray()               # bytes not yet written to the pty
         self._txq_frames: deque[list[int]] = deque()   # [index in sent, bytes still queued]
         self._last_sample_seq = 0             # of the last telemetry frame queued
+        self._rx = bytearray()                # host bytes read, not yet taken by the device
+        self._own = P.FrameDecoder()          # reads back the device's own frames
+        self.muted_frames = 0                 # frames the device made while muted (not sent)
 
     # -- lifecycle ----------------------------------------------------------------------
     def warm_up(self) -> None:
@@ -148,6 +151,7 @@ class VirtualTeensy:
             tmp.replace(self.link)
             self._master = master
             self.decoder = P.FrameDecoder()
+            self._rx.clear()
             self.fw.reset()
             self._state.plugged = True
 
@@ -183,7 +187,7 @@ class VirtualTeensy:
         while self._state.running:
             now = time.monotonic()
             if now >= next_tick:
-                period = 1.0 / self.fw.config.telemetry_rate_hz / self.time_scale
+                period = self.fw.tick_period / self.time_scale
                 next_tick += period
                 # Behind by more than CATCH_UP_LIMIT of wall time (this process was not
                 # scheduled): re-anchor instead of running the missed ticks in a burst.  A burst
@@ -198,18 +202,18 @@ class VirtualTeensy:
                         live = now >= self._state.stall_until
                         if self._state.plugged and live and now >= self._state.mute_until:
                             self._read_host()
-                            tel = self.fw.tick()
-                            self._send(tel)
+                            del self._rx[:self.fw.receive(bytes(self._rx))]
+                            for wire in self.fw.tick():
+                                self._send(wire)
                         elif self._state.plugged:
                             if live:
                                 self._flush()
-                            self.fw.tick()         # physics go on; the device is mute
+                            self.muted_frames += len(self.fw.tick())   # physics go on; mute
                         else:                      # unplugged: unpowered, HV off, wheel coasts
-                            self.fw.plant.wheel.cut_hv()
-                            self.fw.plant.step(None, 1.0 / self.fw.config.telemetry_rate_hz)
+                            self.fw.cut_power()
                     except Exception as exc:  # noqa: BLE001 - firmware must fail safe
                         self.faults_seen.append(repr(exc))
-                        self.fw.hv_off()          # any firmware error: HV off, keep running
+                        self.fw.reset()           # any board error: a reset, HV off, keep running
                 continue
             fd = self._master
             timeout = max(0.0, min(next_tick - now, 0.002))
@@ -227,6 +231,7 @@ class VirtualTeensy:
                 time.sleep(timeout)
 
     def _read_host(self) -> None:
+        """Read what the host wrote; the device takes it at its next tick."""
         try:
             data = os.read(self._master, 4096)
         except (BlockingIOError, InterruptedError):
@@ -236,18 +241,19 @@ class VirtualTeensy:
         if self.faults.host_corrupt:
             data = bytes(b ^ self._rng.randrange(1, 256) if self._rng.random() < self.faults.host_corrupt
                          else b for b in data)
-        for frame in self.decoder.feed(data):
+        self._rx += data
+        for frame in self.decoder.feed(data):       # the ground truth of what arrived
             self.received.append(HostFrame(self.fw.plant.t, frame))
-            self._send(self.fw.receive(frame))
 
-    def _send(self, msg: P.Message) -> None:
-        """Encode, damage as configured, write; record whether the frame arrives intact.
+    def _send(self, wire: bytes) -> None:
+        """Damage a frame of the device as configured and queue it; record whether it
+        arrives intact.
 
         A frame is intact when none of its bytes (its delimiter included) was damaged and the
         previous frame's delimiter arrived (else the two run together and both are lost).
         """
-        counter = self.fw.next_counter()
-        wire = P.encode(msg, counter)
+        frame = self._own.feed(wire)[0]
+        msg = frame.message
         damaged = False
         delim_ok = True
         f = self.faults
@@ -267,9 +273,9 @@ class VirtualTeensy:
         if len(self._txq) + len(wire) > TX_BUFFER_BYTES or self._master < 0:
             # no room for the whole frame: it is not sent at all, and the stream stays framed
             self.write_drops += 1
-            self.sent.append(SentFrame(counter, P.TYPE_OF[type(msg)], False, msg, time.monotonic()))
+            self.sent.append(SentFrame(frame.counter, frame.type, False, msg, time.monotonic()))
             return
-        self.sent.append(SentFrame(counter, P.TYPE_OF[type(msg)],
+        self.sent.append(SentFrame(frame.counter, frame.type,
                                    not damaged and self._prev_delim_intact, msg, 0.0))
         self._prev_delim_intact = delim_ok
         self._txq += wire

@@ -161,6 +161,27 @@ class HybridWheel:
         s[L.S_THETA_ON] = math.inf
         s[L.S_THETA_OFF] = math.inf
 
+    def drive(self, sector: int | None, phi_a: float = 0.0, seq: int = 0) -> None:
+        """Apply HV as a device decided it: ``sector`` is the unwrapped sector of the pad that
+        gets HV (None: no pad), ``phi_a`` [rad] the activation angle it was commanded with
+        (the force law's rise starts there), ``seq`` its command's sequence number.
+
+        For a wheel whose switching the device decides (:mod:`.firmware`): no command is ever
+        latched in the model (it stays idle), so its own tick switching never acts.
+        """
+        s = self.s
+        on = sector is not None
+        if s[L.S_Q] and (not on or sector != s[L.S_ETA]):
+            s[L.S_Q] = 0.0
+            s[L.S_N_OFF] += 1.0
+        if on and not s[L.S_Q]:
+            s[L.S_Q] = 1.0
+            s[L.S_ETA] = sector
+            s[L.S_PHI_A] = phi_a
+            s[L.S_ON_TIME] = 0.0
+            s[L.S_CMD_SEQ] = seq
+            s[L.S_N_ON] += 1.0
+
     # -- flow -----------------------------------------------------------------------------
     def advance(self, h: float = TICK) -> np.ndarray:
         """Advance by h seconds; return the events (k, 4): time, xi1, kind, eta."""

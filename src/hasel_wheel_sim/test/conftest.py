@@ -36,3 +36,24 @@ def deg(x: float) -> float:
 def run():
     """The ``run_wheel`` helper as a fixture (tests import nothing from conftest)."""
     return run_wheel
+
+
+@pytest.fixture(scope="session")
+def firmware_build():
+    """The C++ firmware core built for the host (skips where no compiler exists)."""
+    from hasel_wheel_sim.device_cpp import compiler_missing, default_build
+    missing = compiler_missing()
+    if missing:
+        pytest.skip(f"the C++ firmware core needs {missing}; install g++ and cmake to run it")
+    return default_build()
+
+
+@pytest.fixture(params=["python", "cpp"])
+def make_core(request):
+    """A factory of fresh device cores: the Python reference, then the C++ firmware core."""
+    if request.param == "python":
+        from hasel_wheel_sim.device_core import DeviceCore
+        return DeviceCore
+    from hasel_wheel_sim.device_cpp import CppDeviceCore, load_library
+    lib = load_library(request.getfixturevalue("firmware_build"))
+    return lambda: CppDeviceCore(lib)

@@ -37,7 +37,7 @@ def test_a_host_that_does_not_read_loses_whole_frames_and_then_gets_the_queue(de
     vt, host = device
     n = 6000                                   # ~290 kB of telemetry: far beyond every buffer
     for _ in range(n):
-        vt._send(vt.fw.tick())
+        [vt._send(w) for w in vt.fw.tick()]
     tel = [f for f in vt.sent if f.type == P.TELEMETRY]
     kept = [f.message.sample_seq for f in tel if f.intact]
     frame_len = len(P.encode(tel[0].message, 1)) + 1
@@ -57,7 +57,7 @@ def test_a_host_that_does_not_read_loses_whole_frames_and_then_gets_the_queue(de
     assert got == kept
     assert d.stats.dropped == 0
     # the stream is still framed: the next frame after the drops arrives intact
-    vt._send(vt.fw.tick())
+    [vt._send(w) for w in vt.fw.tick()]
     assert [f.message.sample_seq for f in d.feed(read_all(host))] == [n + 1]
     assert d.stats.sequence_gaps == n - len(kept)          # the gap the host sees is the drops
 
@@ -65,7 +65,7 @@ def test_a_host_that_does_not_read_loses_whole_frames_and_then_gets_the_queue(de
 def test_frames_queued_at_unplug_are_counted_lost(device):
     vt, host = device
     for _ in range(3000):
-        vt._send(vt.fw.tick())
+        [vt._send(w) for w in vt.fw.tick()]
     queued = len(vt._txq_frames)
     assert queued > 0
     drops = vt.write_drops
