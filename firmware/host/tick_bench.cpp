@@ -1,9 +1,11 @@
-// Runs the core's tick N times on a rolling wheel with a command, a heartbeat and telemetry in
-// every tick, so that `valgrind --tool=callgrind` can count the instructions one tick costs
-// (benchmarks/bench_firmware_tick.py).  Usage: hasel_tick_bench TICKS
+// Runs the core's tick on a rolling wheel so that `valgrind --tool=callgrind` can count the
+// instructions one tick costs (benchmarks/bench_firmware.py).
+//   hasel_tick_bench TICKS typical   a heartbeat every 6th tick and a command every 20th
+//   hasel_tick_bench TICKS worst     the receive buffer full of commands at every tick
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 
 #include "hasel_core/device.hpp"
 
@@ -14,45 +16,59 @@ struct CountingSink final : hasel::FrameSink {
   void frame(const uint8_t*, size_t n) override { bytes += n; }
 };
 
-size_t host_frame(hasel::Message m, uint16_t counter, uint8_t* out) {
-  m.counter = counter;
-  return hasel::encode(m, out);
+struct Host {
+  hasel::Device& dev;
+  uint16_t counter = 0;
+  // queue one frame; false when the receive buffer had no room for all of it
+  bool send(hasel::Message m) {
+    uint8_t wire[hasel::kMaxWire];
+    m.counter = ++counter;
+    size_t n = hasel::encode(m, wire);
+    return dev.receive(wire, n) == n;
+  }
+};
+
+hasel::Message command(long k) {
+  hasel::Message c;
+  c.type = hasel::kCommand;
+  c.command_seq = uint32_t(k + 1);
+  c.n_a = uint8_t((k / 10 + 1) % 16);
+  c.phi_a = 0.05f;
+  c.phi_d = 0.38f;
+  return c;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   long ticks = argc > 1 ? std::atol(argv[1]) : 0;
+  bool worst = argc > 2 && std::strcmp(argv[2], "worst") == 0;
   hasel::Device dev;
+  Host host{dev};
   CountingSink sink;
-  uint8_t wire[hasel::kMaxWire];
-  uint16_t counter = 0;
   hasel::Message hv;
   hv.type = hasel::kHv;
   hv.enable = 1;
-  size_t n = host_frame(hv, ++counter, wire);
-  dev.receive(wire, n);
-  uint64_t now = 0;
+  host.send(hv);
   hasel::Sensors s;
   s.hv_monitor = 9000.0f;
   s.current_monitor = 3e-4f;
+  uint64_t now = 0;
   for (long k = 0; k < ticks; ++k) {
     now += 3333;
-    // every tick: a heartbeat and a command (the host's worst case), 6 counts of travel
-    hasel::Message hb;
-    hb.type = hasel::kHeartbeat;
-    hb.host_time_us = now;
-    n = host_frame(hb, ++counter, wire);
-    dev.receive(wire, n);
-    hasel::Message cmd;
-    cmd.type = hasel::kCommand;
-    cmd.command_seq = uint32_t(k + 1);
-    cmd.n_a = uint8_t((k / 10 + 1) % 16);
-    cmd.phi_a = 0.05f;
-    cmd.phi_d = 0.38f;
-    n = host_frame(cmd, ++counter, wire);
-    dev.receive(wire, n);
-    s.encoder_raw = uint16_t((k * 6) % 1024);
+    if (worst) {
+      while (host.send(command(k))) {
+      }
+    } else {
+      if (k % 6 == 0) {
+        hasel::Message hb;
+        hb.type = hasel::kHeartbeat;
+        hb.host_time_us = now;
+        host.send(hb);
+      }
+      if (k % 20 == 0) host.send(command(k));
+    }
+    s.encoder_raw = uint16_t((k * 3) % 1024);   // 1.8 rad/s
     dev.tick(now, s, sink);
   }
   std::printf("%ld ticks, %zu bytes sent\n", ticks, sink.bytes);

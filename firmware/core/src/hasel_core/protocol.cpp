@@ -90,12 +90,26 @@ int payload_size(uint8_t type) {
   }
 }
 
+namespace {
+
+// CRC-16/CCITT-FALSE of every byte value, built at compile time (512 bytes of flash).
+struct CrcTable {
+  uint16_t v[256];
+  constexpr CrcTable() : v() {
+    for (int i = 0; i < 256; ++i) {
+      uint16_t crc = uint16_t(i << 8);
+      for (int b = 0; b < 8; ++b) crc = (crc & 0x8000) ? uint16_t((crc << 1) ^ 0x1021) : uint16_t(crc << 1);
+      v[i] = crc;
+    }
+  }
+};
+constexpr CrcTable kCrcTable;
+
+}  // namespace
+
 uint16_t crc16(const uint8_t* data, size_t n) {
   uint16_t crc = 0xFFFF;
-  for (size_t i = 0; i < n; ++i) {
-    crc ^= uint16_t(data[i]) << 8;
-    for (int b = 0; b < 8; ++b) crc = (crc & 0x8000) ? uint16_t((crc << 1) ^ 0x1021) : uint16_t(crc << 1);
-  }
+  for (size_t i = 0; i < n; ++i) crc = uint16_t((crc << 8) ^ kCrcTable.v[(crc >> 8) ^ data[i]]);
   return crc;
 }
 
