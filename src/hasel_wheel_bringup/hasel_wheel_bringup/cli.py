@@ -202,7 +202,8 @@ def cmd_link_run(args: argparse.Namespace) -> int:
     link = Path(tempfile.mkdtemp(prefix="hasel-link-")) / "usb-Teensyduino_HASEL_wheel-if00"
     plant_cfg = dataclasses.replace(load_plant_config(args.plant), switching="tick")
     dev = DeviceProcess(link, plant_cfg, load_wheel_params(args.wheel_params), w0=args.initial_speed,
-                        time_scale=args.time_scale, faults=LinkFaults(corrupt=args.corrupt, seed=1))
+                        time_scale=args.time_scale, faults=LinkFaults(corrupt=args.corrupt, seed=1),
+                        core_build=_core_build(args.device_core))
     rec = Recorder(bag_dir, custom_data={"tool": "hasel_wheel link-run", "git_revision": git_revision(),
                                          "plant.yaml": Path(args.plant).read_text()})
     seq = Sequencer(math.radians(args.phi_a_deg), math.radians(args.phi_d_deg))
@@ -244,9 +245,47 @@ def cmd_link_run(args: argparse.Namespace) -> int:
               f"latched command {lt.last_command_seq}, faults {lt.fault_flags}; "
               f"sequencer sent {seq.seq}")
     if rep.faults_seen:
-        print(f"  device firmware errors (each switched HV off): {rep.faults_seen[:3]}")
+        print(f"  device board errors (each reset the device, HV off): {rep.faults_seen[:3]}")
     print(f"  bag: {bag_dir}")
     return 0
+
+
+def _core_build(core: str) -> Path | None:
+    """The host build of the C++ firmware core for ``--device-core cpp`` (None: Python)."""
+    if core == "python":
+        return None
+    from hasel_wheel_sim.device_cpp import default_build
+    return default_build()
+
+
+def cmd_virtual_teensy(args: argparse.Namespace) -> int:
+    """Serve the virtual Teensy on a pty at ``args.link`` until SIGINT or SIGTERM."""
+    import signal
+
+    from hasel_wheel_sim.device_process import DeviceProcess
+
+    plant_cfg = load_plant_config(args.plant)
+    stop: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda n, _f: stop.append(n))
+    dev = DeviceProcess(args.link, plant_cfg, load_wheel_params(args.wheel_params),
+                        w0=args.initial_speed, time_scale=args.time_scale,
+                        core_build=_core_build(args.device_core))
+    print(f"virtual Teensy ({args.device_core} device core) on {args.link}; Ctrl-C stops it",
+          flush=True)
+    while not stop:
+        time.sleep(0.1)
+    rep = dev.stop()
+    print(f"virtual Teensy stopped after {rep.t:.1f} s of device time: HV "
+          f"{'on' if rep.hv_enabled else 'off'}, frames sent {len(rep.sent)}, received "
+          f"{len(rep.received)}, watchdog trips {rep.watchdog_trips}", flush=True)
+    return 0
+
+
+def _add_device_core(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--device-core", choices=("python", "cpp"), default="python",
+                   help="the virtual Teensy's device logic: the Python reference or the C++ "
+                        "firmware core built for this machine (needs cmake and g++)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -287,7 +326,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--corrupt", type=float, default=0.0, help="byte corruption probability")
     r.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
     r.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant.yaml")))
+    _add_device_core(r)
     r.set_defaults(func=cmd_link_run)
+    v = sub.add_parser("virtual-teensy", help="serve the virtual Teensy on a pty until Ctrl-C "
+                                              "(point driver_node's port at LINK)")
+    v.add_argument("link", type=Path, help="path of the symlink to create, e.g. "
+                                           "/tmp/usb-Teensyduino_HASEL_wheel-if00")
+    v.add_argument("--initial-speed", type=float, default=2.0, help="[rad/s]")
+    v.add_argument("--time-scale", type=float, default=1.0, help="simulated seconds per wall second")
+    v.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
+    v.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant_realistic.yaml")))
+    _add_device_core(v)
+    v.set_defaults(func=cmd_virtual_teensy)
     ident_cli.add_parsers(sub)
     bag_cli.add_parsers(sub)
     return ap

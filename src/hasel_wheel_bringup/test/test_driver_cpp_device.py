@@ -2,6 +2,9 @@
 firmware core (built for the host) instead of the Python device: the MPC holds a reference
 through it, so the firmware's own logic is in the closed loop."""
 import gc
+import signal
+import subprocess
+import sys
 import time
 
 import pytest
@@ -78,3 +81,30 @@ def test_the_mpc_holds_a_reference_through_the_cpp_firmware_core(tmp_path, firmw
     assert switch_ons > 60                                  # the firmware switched the pads
     assert not rep.faults_seen and rep.watchdog_trips == 0
     assert not rep.hv_enabled                               # the driver's shutdown: HV off
+
+
+def test_virtual_teensy_command_serves_the_cpp_core_until_sigint(tmp_path, firmware_build):
+    link = tmp_path / "teensy"
+    proc = subprocess.Popen([sys.executable, "-m", "hasel_wheel_bringup.cli", "virtual-teensy",
+                             str(link), "--device-core", "cpp"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    samples = []
+    core = None
+    try:
+        t_end = time.monotonic() + 120.0
+        while not link.is_symlink() and time.monotonic() < t_end and proc.poll() is None:
+            time.sleep(0.05)
+        core = DriverCore(LinkConfig(str(link), enable_hv_on_connect=True),
+                          on_sample=samples.append)
+        core.start()
+        while time.monotonic() < t_end and not (len(samples) > 300 and samples[-1].hv_monitor > 0):
+            time.sleep(0.05)
+    finally:
+        if core is not None:
+            core.shutdown()
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    assert len(samples) > 300 and any(x.hv_monitor == 9000.0 for x in samples), out
+    assert samples[-1].hv_monitor == 0.0 and samples[-1].fault_flags & P.F_ESTOP  # shut down
+    assert proc.returncode == 0, out
+    assert not link.exists()                      # unplugged on the way out

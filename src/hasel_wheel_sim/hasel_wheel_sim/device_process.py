@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import gc
 import os
+import signal
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,9 @@ class DeviceReport:
 
 
 def _device_main(conn, plant_config, params, w0, link, time_scale, faults, core_build) -> None:
+    # a Ctrl-C at the terminal reaches the whole process group; this process stops only when
+    # its parent says so (stop), so that the parent still gets the report
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     core = CppDeviceCore(load_library(core_build)) if core_build else None
     vt = VirtualTeensy(Firmware(Plant(params, plant_config, xi2=w0), core), link, time_scale, faults)
     # Compile (or load) the core first, then move every object alive now out of the garbage
