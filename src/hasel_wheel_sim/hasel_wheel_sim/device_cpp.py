@@ -44,7 +44,7 @@ def compiler_missing() -> str:
 def _sources_digest(source: Path) -> str:
     h = hashlib.sha256()
     for p in sorted(source.rglob("*")):
-        if p.is_file() and p.suffix in (".cpp", ".hpp", ".h", ".txt") and "build" not in p.parts:
+        if p.is_file() and p.suffix in (".cpp", ".hpp", ".h", ".ino", ".txt") and "build" not in p.parts:
             h.update(str(p.relative_to(source)).encode())
             h.update(p.read_bytes())
     return h.hexdigest()[:16]
