@@ -1,0 +1,65 @@
+// HASEL rolling soft wheel, Teensy 3.6 (USB type: Serial).  Glue between the board adapters
+// (board.h, pins.h) and the portable core (hasel::Device, firmware/core), which holds every
+// rule of protocol v1 (docs/protocol.md).  This file schedules the tick and moves bytes,
+// readings and outputs; it decides nothing.
+//
+// Scheduling: loop() polls a deadline on the 64-bit device clock; no IntervalTimer.  A tick
+// bit-bangs the encoder and the shift registers with microsecond waits (about 0.1 ms) and
+// uses USB serial, which an interrupt handler should not do while the main program might.
+// Polling keeps all of it in one context with no shared state, and loop() does nothing else,
+// so a tick starts within one loop() pass of its deadline.
+#include <Arduino.h>
+
+#include "hasel_core.h"  // first: Arduino CLI finds the core library by this header
+#include "board.h"
+
+static hasel::Device wheel;           // the device rules (protocol section 4)
+static board::UsbSink usb_sink;       // frames to USB serial, whole or dropped
+static board::TickClock tick_clock;   // tick deadlines at the core's telemetry rate
+
+// Host bytes into the core, as many as it takes; the rest stays in the USB buffers.
+static void feed_host_bytes() {
+  while (Serial.available() > 0) {
+    uint8_t b = uint8_t(Serial.peek());
+    if (wheel.receive(&b, 1) == 0) return;
+    Serial.read();
+  }
+}
+
+static hasel::Sensors read_sensors() {
+  hasel::Sensors s;
+  uint16_t raw = 0;
+  s.encoder_ok = board::read_encoder(&raw);
+  s.encoder_raw = raw;
+  s.hv_monitor = board::read_hv_volts();
+  s.current_monitor = board::read_current_amps();
+  return s;
+}
+
+// Drive the outputs until the next tick.  No pad without HV, and never more than one pad:
+// a mask that breaks either is not applied (the core never sends one).
+static void apply(const hasel::Outputs& out) {
+  uint16_t mask = out.hv_supply ? out.active_mask : 0;
+  if (mask & (mask - 1)) mask = 0;
+  board::shift_out_mask(mask);
+  board::set_hv_supply(out.hv_supply);
+}
+
+void setup() {
+  board::safe_outputs();   // first: every optocoupler off, HV converter supply off
+  board::begin_inputs();
+  Serial.begin(115200);    // USB CDC: the rate is ignored
+  wheel.reset();
+  tick_clock.start(board::device_time_us());
+}
+
+void loop() {
+  uint64_t now = board::device_time_us();
+  if (!tick_clock.due(now)) return;
+  feed_host_bytes();
+  hasel::Sensors sensors = read_sensors();
+  hasel::Outputs out = wheel.tick(now, sensors, usb_sink);
+  apply(out);
+  tick_clock.advance(now, out.telemetry_rate_hz);
+  Serial.send_now();       // send this tick's frames now, not when Teensy's flush timer expires
+}
