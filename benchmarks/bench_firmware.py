@@ -3,8 +3,9 @@
 * instructions one 300 Hz tick costs the core (host frames handled, rules, encoder, switching,
   telemetry encoded), counted by valgrind's callgrind inside ``Device::tick`` and
   ``Device::receive`` only, as the difference of a 11,000- and a 1,000-tick run (start-up
-  cancels): the typical tick (a heartbeat every 6th tick, a command every 20th) and the worst
-  (the 512-byte receive buffer full of commands, every one answered);
+  cancels): the typical tick (a heartbeat every 6th tick, a command every 20th), and the
+  512-byte receive buffer full at every tick, of commands or of the smallest frames (the
+  most answers): the worst of these two is the worst tick;
 * the same converted to the Teensy 3.6 (Cortex-M4F at 180 MHz) with a stated factor, plus the
   board's I/O per tick, against the tick period (target: worst case below the 3.33 ms tick);
 * the lockstep of the C++ core with the Python device core over 60 s of the realistic plant
@@ -26,10 +27,12 @@ from hasel_wheel_sim.device_cpp import build_core, default_build, BUILD_ROOT
 #: flash with its cache averages at most about 2 cycles per instruction.
 CYCLES_PER_HOST_INSTRUCTION = 3.0
 TEENSY_HZ = 180e6
-#: The board's I/O per tick [us]: the EMS22A's 16-bit synchronous read at 1 MHz (18), two
-#: 12-bit ADC reads (2 x 5), the 16-bit shift-out and latch (2), USB writes of the tick's
-#: frames (1 us per 10 bytes: 5 typical, 60 worst).
-IO_US = {"typical": 18 + 10 + 2 + 5, "worst": 18 + 10 + 2 + 60}
+#: The board's I/O per tick [us], from the waits in firmware/teensy/hasel_wheel_fw/board.cpp:
+#: the EMS22A's 16-bit read with 1 us clock phases (34), the 16-bit shift-out and latch with
+#: 1 us edges (34), two 12-bit ADC reads (about 10 each), USB writes of the tick's frames
+#: (about 1 us per 10 bytes: 5 typical, 100 with a full buffer's answers).
+IO_US = {"typical": 34 + 34 + 20 + 5, "commands": 34 + 34 + 20 + 100,
+         "answers": 34 + 34 + 20 + 100}
 TICK_US = 1e6 / 300
 
 
@@ -51,7 +54,7 @@ def main() -> None:
     if shutil.which("valgrind") is None:
         print("  valgrind not found: install it (apt-get install valgrind) for this figure")
     else:
-        for mode in ("typical", "worst"):
+        for mode in ("typical", "commands", "answers"):
             n = instructions_per_tick(str(build / "hasel_tick_bench"), mode)
             core_us = n * CYCLES_PER_HOST_INSTRUCTION / TEENSY_HZ * 1e6
             total = core_us + IO_US[mode]

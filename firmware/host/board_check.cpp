@@ -388,6 +388,24 @@ void check_watchdog_pin(Check& c) {
   c.expect(mock::level(pins::kHvEnable) == 0, "HV enable low");
 }
 
+// The chip's watchdog runs from setup() on with 100 ms, every tick refreshes it, and a loop()
+// that stops refreshing it lets it expire (the chip resets: safe outputs again).
+void check_hardware_watchdog(Check& c) {
+  power_cycle();
+  c.expect(mock::watchdog_enabled() && mock::watchdog_timeout_ms() == 100,
+           "watchdog enabled by setup() with 100 ms");
+  uint32_t before = mock::watchdog_refreshes();
+  uint64_t t = 0, t0 = 0;
+  tick_messages(&t0);
+  for (t = t0; t - t0 < 1000000;) tick_messages(&t);
+  c.expect(!mock::watchdog_expired(), "not expired while ticking");
+  c.expect(mock::watchdog_refreshes() - before >= 300, "refreshed at every tick");
+  mock::advance_us(99000);
+  c.expect(!mock::watchdog_expired(), "not expired within 100 ms of the last tick");
+  mock::advance_us(2000);
+  c.expect(mock::watchdog_expired(), "expired 101 ms after the last tick");
+}
+
 // device_time_us() runs on across micros()'s 32-bit wrap.
 void check_clock_wrap(Check& c) {
   uint64_t now = now_us();
@@ -416,6 +434,7 @@ int main() {
       {"drop_whole_frame", check_drop_whole_frame}, {"tick_pad", check_tick_pad},
       {"rx_leftover", check_rx_leftover},       {"tick_rate", check_tick_rate},
       {"watchdog_pin", check_watchdog_pin},     {"clock_wrap", check_clock_wrap},
+      {"hardware_watchdog", check_hardware_watchdog},
   };
   int failed = 0;
   for (const Entry& e : checks) {

@@ -1,7 +1,9 @@
 // Runs the core's tick on a rolling wheel so that `valgrind --tool=callgrind` can count the
 // instructions one tick costs (benchmarks/bench_firmware.py).
-//   hasel_tick_bench TICKS typical   a heartbeat every 6th tick and a command every 20th
-//   hasel_tick_bench TICKS worst     the receive buffer full of commands at every tick
+//   hasel_tick_bench TICKS typical    a heartbeat every 6th tick and a command every 20th
+//   hasel_tick_bench TICKS commands   the receive buffer full of commands at every tick
+//   hasel_tick_bench TICKS answers    the receive buffer full of the smallest frames (8 bytes,
+//                                     CLEAR_ESTOP) at every tick: the most answers per tick
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -42,7 +44,11 @@ hasel::Message command(long k) {
 
 int main(int argc, char** argv) {
   long ticks = argc > 1 ? std::atol(argv[1]) : 0;
-  bool worst = argc > 2 && std::strcmp(argv[2], "worst") == 0;
+  const char* mode = argc > 2 ? argv[2] : "typical";
+  bool commands = std::strcmp(mode, "commands") == 0;
+  bool answers = std::strcmp(mode, "answers") == 0;
+  hasel::Message clear;
+  clear.type = hasel::kClearEstop;
   hasel::Device dev;
   Host host{dev};
   CountingSink sink;
@@ -56,8 +62,11 @@ int main(int argc, char** argv) {
   uint64_t now = 0;
   for (long k = 0; k < ticks; ++k) {
     now += 3333;
-    if (worst) {
+    if (commands) {
       while (host.send(command(k))) {
+      }
+    } else if (answers) {
+      while (host.send(clear)) {
       }
     } else {
       if (k % 6 == 0) {

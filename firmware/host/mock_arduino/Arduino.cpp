@@ -60,6 +60,18 @@ struct Board {
 Board sim;
 uint64_t now = 0;        // [ns]; never reset
 
+// The K66 watchdog: unlock (0xC520, 0xD928) opens a window for the configuration writes.
+struct Watchdog {
+  int unlock_step = 0;   // 2: unlocked
+  bool enabled = false;
+  uint32_t toval = 0;
+  uint32_t presc = 0x400;
+  int refresh_step = 0;
+  uint32_t refreshes = 0;
+  uint64_t last_refresh = 0;   // [ns]
+};
+Watchdog wdog;
+
 int level_of(const Pin& p) {
   if (p.output) return p.latch;
   if (p.pull == INPUT_PULLUP) return 1;
@@ -197,6 +209,15 @@ int MockSerial::read() {
   return b;
 }
 
+size_t MockSerial::readBytes(char* buffer, size_t length) {
+  size_t n = 0;
+  while (n < length && !sim.rx.empty()) {
+    buffer[n++] = char(sim.rx.front());
+    sim.rx.pop_front();
+  }
+  return n;
+}
+
 // Teensy 3.x usb_serial_write_buffer_free(): the current packet's room, taking a fresh
 // packet while fewer than the limit are queued.
 int MockSerial::availableForWrite() {
@@ -239,6 +260,7 @@ void MockSerial::send_now() {
 namespace mock {
 
 void power_on() {
+  wdog = Watchdog{};        // a reset leaves the watchdog as Teensyduino's start-up sets it
   Encoder enc;
   enc.frame = sim.enc.frame;
   enc.connected = sim.enc.connected;
@@ -292,7 +314,48 @@ std::vector<uint8_t> take_output() {
 
 uint32_t tx_overruns() { return sim.tx_overruns; }
 uint32_t flushes() { return sim.flushes; }
+bool watchdog_enabled() { return wdog.enabled; }
+uint32_t watchdog_timeout_ms() { return wdog.toval * ((wdog.presc >> 8) + 1); }
+uint32_t watchdog_refreshes() { return wdog.refreshes; }
+bool watchdog_expired() {
+  return wdog.enabled && now - wdog.last_refresh > uint64_t(watchdog_timeout_ms()) * 1000000u;
+}
+
 void advance_us(uint64_t us) { now += us * 1000u; }
 uint64_t now_ns() { return now; }
 
 }  // namespace mock
+
+void noInterrupts() {}
+void interrupts() {}
+
+MockWdogRegister WDOG_UNLOCK{0}, WDOG_STCTRLH{1}, WDOG_TOVALH{2}, WDOG_TOVALL{3}, WDOG_PRESC{4},
+    WDOG_REFRESH{5};
+
+MockWdogRegister& MockWdogRegister::operator=(uint32_t v) {
+  switch (id) {
+    case 0:
+      wdog.unlock_step = (v == 0xC520) ? 1 : (v == 0xD928 && wdog.unlock_step == 1) ? 2 : 0;
+      break;
+    case 1:
+      if (wdog.unlock_step == 2) {
+        wdog.enabled = (v & WDOG_STCTRLH_WDOGEN) != 0;
+        wdog.last_refresh = now;
+      }
+      break;
+    case 2: if (wdog.unlock_step == 2) wdog.toval = (wdog.toval & 0xFFFFu) | (v << 16); break;
+    case 3: if (wdog.unlock_step == 2) wdog.toval = (wdog.toval & 0xFFFF0000u) | (v & 0xFFFFu); break;
+    case 4: if (wdog.unlock_step == 2) wdog.presc = v; break;
+    default:
+      if (v == 0xA602) {
+        wdog.refresh_step = 1;
+      } else if (v == 0xB480 && wdog.refresh_step == 1) {
+        wdog.refresh_step = 0;
+        ++wdog.refreshes;
+        wdog.last_refresh = now;
+      } else {
+        wdog.refresh_step = 0;
+      }
+  }
+  return *this;
+}

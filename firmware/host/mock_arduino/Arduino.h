@@ -27,6 +27,23 @@ uint8_t digitalRead(uint8_t pin);
 int analogRead(uint8_t pin);
 void analogReadResolution(unsigned int bits);
 void delayMicroseconds(uint32_t us);
+void noInterrupts();
+void interrupts();
+
+// The Teensy 3.6's watchdog (Kinetis K66 WDOG), as kinetis.h names it: writes go to the
+// simulated watchdog (mock::watchdog_*).
+struct MockWdogRegister {
+  uint8_t id;
+  MockWdogRegister& operator=(uint32_t value);
+};
+extern MockWdogRegister WDOG_UNLOCK, WDOG_STCTRLH, WDOG_TOVALH, WDOG_TOVALL, WDOG_PRESC,
+    WDOG_REFRESH;
+#define WDOG_UNLOCK_SEQ1 ((uint16_t)0xC520)
+#define WDOG_UNLOCK_SEQ2 ((uint16_t)0xD928)
+#define WDOG_STCTRLH_WDOGEN ((uint16_t)0x0001)
+#define WDOG_STCTRLH_ALLOWUPDATE ((uint16_t)0x0010)
+#define WDOG_STCTRLH_STOPEN ((uint16_t)0x0040)
+#define WDOG_STCTRLH_WAITEN ((uint16_t)0x0080)
 uint32_t micros();
 uint32_t millis();
 
@@ -37,6 +54,7 @@ class MockSerial {
   int available();
   int peek();
   int read();
+  size_t readBytes(char* buffer, size_t length);
   int availableForWrite();
   size_t write(const uint8_t* data, size_t n);
   size_t write(uint8_t b);
@@ -101,6 +119,13 @@ std::vector<uint8_t> take_output();   // bytes the device wrote since the last c
 void set_host_stalled(bool stalled);  // a stalled host reads nothing: the queue fills up
 uint32_t tx_overruns();               // writes that would have waited for a packet
 uint32_t flushes();                   // Serial.send_now() calls
+
+// The watchdog: enabled by an unlocked STCTRLH write with WDOGEN, timeout TOVAL ms of the
+// 1 kHz LPO clock (PRESC 0), restarted by the refresh pair 0xA602, 0xB480.
+bool watchdog_enabled();
+uint32_t watchdog_timeout_ms();
+uint32_t watchdog_refreshes();
+bool watchdog_expired();              // enabled, and not refreshed for longer than the timeout
 
 void advance_us(uint64_t us);
 uint64_t now_ns();

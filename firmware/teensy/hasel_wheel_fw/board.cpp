@@ -80,6 +80,27 @@ void safe_outputs() {
   shift_and_latch(0);
 }
 
+void start_watchdog(uint32_t timeout_ms) {
+  noInterrupts();
+  WDOG_UNLOCK = WDOG_UNLOCK_SEQ1;   // the unlock pair, then the configuration within 256
+  WDOG_UNLOCK = WDOG_UNLOCK_SEQ2;   // bus clocks
+  __asm__ volatile("nop");
+  __asm__ volatile("nop");
+  WDOG_TOVALH = uint16_t(timeout_ms >> 16);
+  WDOG_TOVALL = uint16_t(timeout_ms);
+  WDOG_PRESC = 0;                   // LPO 1 kHz, not divided: one count per ms
+  WDOG_STCTRLH = WDOG_STCTRLH_ALLOWUPDATE | WDOG_STCTRLH_WDOGEN | WDOG_STCTRLH_WAITEN |
+                 WDOG_STCTRLH_STOPEN;
+  interrupts();
+}
+
+void feed_watchdog() {
+  noInterrupts();                   // the refresh pair must follow within 20 bus clocks
+  WDOG_REFRESH = 0xA602;
+  WDOG_REFRESH = 0xB480;
+  interrupts();
+}
+
 void begin_inputs() {
   drive(pins::kEncCs, HIGH);
   drive(pins::kEncClk, HIGH);

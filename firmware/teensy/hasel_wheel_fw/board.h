@@ -16,6 +16,12 @@ namespace board {
 // high.
 void safe_outputs();
 
+// The chip's own watchdog (Kinetis WDOG on the 1 kHz LPO clock): it resets the Teensy, and so
+// runs safe_outputs() again, unless feed_watchdog() is called within timeout_ms.  A hung tick
+// then cannot leave a pad or the HV supply on.
+void start_watchdog(uint32_t timeout_ms);
+void feed_watchdog();
+
 // Encoder lines idle (CS high, CLK high, DO input with pull-up: a missing encoder reads all
 // ones, which fails the status check) and the ADC at pins::kAdcBits.
 void begin_inputs();

@@ -4,7 +4,7 @@
 // readings and outputs; it decides nothing.
 //
 // Scheduling: loop() polls a deadline on the 64-bit device clock; no IntervalTimer.  A tick
-// bit-bangs the encoder and the shift registers with microsecond waits (about 0.1 ms) and
+// bit-bangs the encoder and the shift registers with microsecond waits (about 70 us) and
 // uses USB serial, which an interrupt handler should not do while the main program might.
 // Polling keeps all of it in one context with no shared state, and loop() does nothing else,
 // so a tick starts within one loop() pass of its deadline.
@@ -13,16 +13,24 @@
 #include "hasel_core.h"  // first: Arduino CLI finds the core library by this header
 #include "board.h"
 
+// The chip resets (all outputs safe again) when no tick has refreshed its watchdog for this
+// long [ms]: the protocol's default host watchdog.
+constexpr uint32_t kHardwareWatchdogMs = 100;
+
 static hasel::Device wheel;           // the device rules (protocol section 4)
 static board::UsbSink usb_sink;       // frames to USB serial, whole or dropped
 static board::TickClock tick_clock;   // tick deadlines at the core's telemetry rate
 
-// Host bytes into the core, as many as it takes; the rest stays in the USB buffers.
+// Host bytes into the core, as many as it has room for; the rest stays in the USB buffers.
 static void feed_host_bytes() {
-  while (Serial.available() > 0) {
-    uint8_t b = uint8_t(Serial.peek());
-    if (wheel.receive(&b, 1) == 0) return;
-    Serial.read();
+  uint8_t chunk[64];
+  for (;;) {
+    size_t n = size_t(Serial.available());
+    if (n > wheel.rx_room()) n = wheel.rx_room();
+    if (n > sizeof chunk) n = sizeof chunk;
+    if (n == 0) return;
+    n = Serial.readBytes(reinterpret_cast<char*>(chunk), n);   // available: no waiting
+    wheel.receive(chunk, n);
   }
 }
 
@@ -50,6 +58,7 @@ void setup() {
   board::begin_inputs();
   Serial.begin(115200);    // USB CDC: the rate is ignored
   wheel.reset();
+  board::start_watchdog(kHardwareWatchdogMs);
   tick_clock.start(board::device_time_us());
 }
 
@@ -62,4 +71,5 @@ void loop() {
   apply(out);
   tick_clock.advance(now, out.telemetry_rate_hz);
   Serial.send_now();       // send this tick's frames now, not when Teensy's flush timer expires
+  board::feed_watchdog();
 }

@@ -141,9 +141,10 @@ def run_lockstep(core_build, seconds: float = 60.0, seed: int = 1, reference: fl
         if k % HEARTBEAT_TICKS == 0:
             host.send(P.Heartbeat(k))
         data = host.take()
-        taken = fw.receive(data)
-        if cpp.receive(data) != taken or taken != len(data):
-            report.first_mismatch = f"tick {k}: receive took {taken} vs {cpp.receive(b'')}"
+        taken, taken_cpp = fw.receive(data), cpp.receive(data)
+        if taken != taken_cpp or taken != len(data):
+            report.first_mismatch = (f"tick {k}: of {len(data)} host bytes the Python device "
+                                     f"took {taken}, the C++ core {taken_cpp}")
             break
         sensors = fw.sensors()._replace(**over)
         now = int(round(fw.plant.t * 1e6))

@@ -184,7 +184,7 @@ class DeviceCore:
             s.faults |= P.F_ENCODER
             if lost:
                 self._hv_off()
-        s.sample_seq += 1
+        s.sample_seq = (s.sample_seq + 1) & 0xFFFFFFFF
         out = self.outputs()
         self._send(P.Telemetry(
             device_time_us=now_us, sample_seq=s.sample_seq,

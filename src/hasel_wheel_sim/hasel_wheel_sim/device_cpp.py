@@ -44,7 +44,8 @@ def compiler_missing() -> str:
 def _sources_digest(source: Path) -> str:
     h = hashlib.sha256()
     for p in sorted(source.rglob("*")):
-        if p.is_file() and p.suffix in (".cpp", ".hpp", ".h", ".ino", ".txt") and "build" not in p.parts:
+        if p.is_file() and p.suffix in (".cpp", ".hpp", ".h", ".ino", ".txt") and \
+                "build" not in p.relative_to(source).parts:
             h.update(str(p.relative_to(source)).encode())
             h.update(p.read_bytes())
     return h.hexdigest()[:16]
@@ -74,12 +75,30 @@ def build_core(build_root: str | os.PathLike, source: str | os.PathLike = FIRMWA
     with open(out / ".lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         # configured once; the build itself is incremental (nothing to do: well under a second)
-        for cmd in ([] if (out / "CMakeCache.txt").exists() else [configure]) + [build]:
+        fresh = not (out / "CMakeCache.txt").exists()
+        for cmd in ([configure] if fresh else []) + [build]:
             r = subprocess.run(cmd, capture_output=True, text=True)
             if r.returncode != 0:
                 raise FirmwareBuildError(f"{' '.join(cmd)} failed ({r.returncode}):\n"
                                          f"{r.stdout[-4000:]}{r.stderr[-4000:]}")
+    if fresh:
+        _remove_stale_builds(out)
     return out
+
+
+def _remove_stale_builds(current: Path) -> None:
+    """Remove the builds of older sources beside ``current`` (same build type) that no
+    process is using (their lock is free)."""
+    prefix = current.name.rsplit("-", 1)[0] + "-"
+    for old in current.parent.glob(prefix + "*"):
+        if old == current or not (old / ".lock").exists():
+            continue
+        with open(old / ".lock", "w") as lock:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                continue
+            shutil.rmtree(old, ignore_errors=True)
 
 
 def default_build() -> Path:

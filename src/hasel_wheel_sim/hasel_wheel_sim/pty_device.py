@@ -212,8 +212,10 @@ class VirtualTeensy:
                         else:                      # unplugged: unpowered, HV off, wheel coasts
                             self.fw.cut_power()
                     except Exception as exc:  # noqa: BLE001 - firmware must fail safe
+                        # any board error resets the device, as a Teensy's watchdog would:
+                        # HV off, emergency stop and configuration cleared; it keeps running
                         self.faults_seen.append(repr(exc))
-                        self.fw.reset()           # any board error: a reset, HV off, keep running
+                        self.fw.reset()
                 continue
             fd = self._master
             timeout = max(0.0, min(next_tick - now, 0.002))

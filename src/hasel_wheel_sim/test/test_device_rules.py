@@ -36,7 +36,8 @@ class Bench:
 
     def send(self, msg):
         self.counter += 1
-        assert self.core.receive(P.encode(msg, self.counter)) > 0
+        wire = P.encode(msg, self.counter)
+        assert self.core.receive(wire) == len(wire)
         return self.counter
 
     def tick(self, step=0, raw=None, ok=True, hv=None, current=None):
@@ -125,6 +126,32 @@ def test_estop_latches_until_cleared_and_clearing_does_not_enable_hv(bench):
     _, tel, out = bench.tick()
     assert not out.hv_supply and not tel.fault_flags & P.F_ESTOP
     enable(bench)
+
+
+def test_hv_off_switches_the_pad_off_at_once_and_forgets_every_command(bench):
+    enable(bench)
+    bench.send(P.Command(1, 0, D(0), D(22.5)))          # pad 0 at count 0: on at once
+    _, tel, out = bench.tick()
+    assert tel.q == 1 and out.active_mask == 1
+    bench.send(P.Command(2, 1, D(3), D(22)))             # pending behind pad 0
+    bench.send(P.Hv(0))
+    _, tel, out = bench.tick()
+    assert (out.hv_supply, out.active_mask, tel.q) == (False, 0, 0)
+    enable(bench)                                        # HV back: neither command returns
+    rows = switch_ticks(bench, 200)                      # past both pads' angles
+    assert not any(q for _, _, q, _ in rows) and rows[-1][1] > 64 + counts(D(22))
+
+
+def test_frames_of_device_types_are_neither_answered_nor_keep_the_watchdog_alive(bench):
+    enable(bench)
+    for i in range(40):
+        bench.core.receive(P.encode(P.Telemetry(0, i, 0, 0, 0, 0, 0, 0, 0.0, 0.0, 0, 0), i) +
+                           P.encode(P.Ack(P.HEARTBEAT, i, 0), i))
+        replies, tel, out = bench.tick()
+        assert replies == []
+        if not out.hv_supply:
+            break
+    assert i == 29 and tel.fault_flags & P.F_WATCHDOG   # 30 ticks: as with no frame at all
 
 
 @pytest.mark.parametrize("value", [2, 255])
@@ -216,12 +243,21 @@ def test_float32_pi_over_8_is_accepted(bench):
     assert [c for _, c, q, _ in rows if q][-1] + 1 == 128    # off at the sector's end
 
 
-@pytest.mark.parametrize("cfg", [P.Config(10, 100, 2000, 0), P.Config(300, 5, 2000, 0),
-                                 P.Config(300, 100, 5, 0), P.Config(300, 100, 2000, 1)])
-def test_bad_configuration_is_rejected(bench, cfg):
+@pytest.mark.parametrize("cfg", [P.Config(10, 1000, 10000, 0), P.Config(300, 1001, 10000, 0),
+                                 P.Config(1000, 5, 2000, 0), P.Config(300, 1000, 10001, 0),
+                                 P.Config(300, 1000, 10000, 1)])
+def test_a_rejected_configuration_changes_nothing(bench, cfg):
+    enable(bench)
     c = bench.send(cfg)
     replies, _, out = bench.tick()
-    assert replies == [P.Reject(P.CONFIG, c, 0, P.R_CONFIG)] and out.telemetry_rate_hz == 300
+    assert replies == [P.Reject(P.CONFIG, c, 0, P.R_CONFIG)]
+    st = bench.core.state()
+    assert (st.telemetry_rate_hz, st.watchdog_ms, st.max_on_ms, st.drain_mode) == (300, 100, 2000, 0)
+    for i in range(40):                                  # the default watchdog still holds
+        _, _, out = bench.tick()
+        if not out.hv_supply:
+            break
+    assert i == 29                                       # the 30th tick: 100 ms
 
 
 # -- the safety interlocks (rules 4-6, section 6) -------------------------------------------

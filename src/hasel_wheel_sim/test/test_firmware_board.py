@@ -12,7 +12,8 @@ pytestmark = pytest.mark.xdist_group("firmware_board")
 
 TARGET = "hasel_board_check"
 #: The checks the board layer must pass (board_check.cpp prints more).
-REQUIRED = ("safe_setup", "shift_order", "encoder_frame", "tick_ack", "drop_whole_frame")
+REQUIRED = ("safe_setup", "shift_order", "encoder_frame", "tick_ack", "drop_whole_frame",
+            "rx_leftover", "watchdog_pin", "hardware_watchdog")
 LINE = re.compile(r"^check (\w+): (pass|fail)\b", re.M)
 
 

@@ -71,8 +71,9 @@ def random_frames(rng, n):
             if code in "f":
                 values.append(rng.choice([0.0, 1.5, -0.3, 9000.0, 3e-4]))
             else:
-                bits = {"B": 8, "H": 16, "I": 32, "i": 31, "Q": 64}[code]
-                values.append(rng.randrange(2 ** bits))
+                lo, hi = {"B": (0, 2**8), "H": (0, 2**16), "I": (0, 2**32),
+                          "i": (-2**31, 2**31), "Q": (0, 2**64)}[code]
+                values.append(rng.randrange(lo, hi))
         out.append(P.encode(cls(*values), k + 1))
     return out
 

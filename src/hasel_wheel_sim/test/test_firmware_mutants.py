@@ -40,6 +40,17 @@ MUTANTS = {
     "a glitch is not taken": (ENCODER, "if (d > limit || d < -limit) {",
                               "if (limit < 0) {",
                               "glitched_reading"),
+    "HV off on request": (DEVICE, "} else if (m.enable == 0) {\n        hv_off();",
+                          "} else if (m.enable == 0) {", "hv_off_switches"),
+    "HV off forgets every command": (DEVICE, "  s_.hv_enabled = false;\n  pads_off();",
+                                     "  s_.hv_enabled = false;\n  s_.q = false;", "hv_off_switches"),
+    "only host frames are handled": (DEVICE, "&& is_host_type(m.type)) handle",
+                                     "&& is_host_type(m.type | 0x10)) handle",
+                                     "device_types"),
+    "a rejected configuration changes nothing": (
+        DEVICE, "      reason = check_config(m);\n",
+        "      s_.watchdog_ms = m.watchdog_ms;\n      reason = check_config(m);\n",
+        "rejected_configuration"),
     "a lost position switches HV off": (DEVICE, "if (reading.lost) hv_off();", "",
                                         "lose_the_position"),
 }

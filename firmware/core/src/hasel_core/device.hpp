@@ -98,6 +98,8 @@ class Device {
   // handled at the next tick, in arrival order.  Returns how many were taken: the board leaves
   // the rest in its USB buffers for the next call.
   size_t receive(const uint8_t* data, size_t n);
+  // Bytes receive() takes now.
+  size_t rx_room() const { return kRxBuffer - rx_len_; }
 
   // One tick at device time now_us: host frames (each answered), rules 4-6, the encoder
   // reading and at most one switch, then one TELEMETRY frame.  Frames go to `sink`.
