@@ -4,8 +4,9 @@ The Python core (:class:`~hasel_wheel_sim.device_core.DeviceCore`) drives the pl
 virtual Teensy does; the C++ core, built for the host, gets exactly the same host bytes,
 sensor readings and device time on every tick.  The host is the MPC speed controller, fed
 from the device's telemetry, and a schedule of faults: corrupted and cut host frames, host
-silence, an over-current sample, an emergency stop, configuration and invalid commands.
-Every tick the two cores' frames must match byte for byte and their states field by field.
+silence, an over-current sample, an HV sag, an emergency stop, configuration (a short
+maximum on-time, a faster tick) and invalid input, HV off by the host, a device reset and a
+failing encoder.  Every tick the two cores' frames must match byte for byte and their states field by field.
 ``test_firmware_lockstep.py`` holds the result; ``benchmarks/bench_firmware.py`` prints it.
 """
 from __future__ import annotations
@@ -42,6 +43,7 @@ class LockstepReport:
     first_mismatch: str = ""             # '' when the cores agreed on every tick
     final_speed: float = math.nan        # true wheel speed at the end [rad/s]
     reference: float = math.nan
+    speeds: list[float] = field(default_factory=list)   # true speed at each whole second [rad/s]
 
 
 class _Host:
@@ -90,8 +92,8 @@ class _Host:
 
 
 def _faults(k: int, host: _Host) -> dict:
-    """The fault schedule at tick k (300 per second), one fault every ten seconds from 5 s,
-    repeating every 60 s: frames it sends, sensor readings it overrides."""
+    """The fault schedule at tick k (300 per second), repeating every 60 s: frames it sends,
+    sensor readings it overrides, and ``reset`` when both devices reset."""
     sec, tick = divmod(k % 18000, 300)
     over: dict = {}
     if sec == 5 and tick < 5:                                # five corrupted heartbeats
@@ -124,6 +126,18 @@ def _faults(k: int, host: _Host) -> dict:
         host.send(P.Hv(2))
     if sec == 50 and tick == 150:
         host.send(P.Config(300, 100, 2000, 0))
+    if sec == 52 and tick in (0, 30):                        # the host switches HV off, on
+        host.send(P.Hv(int(tick == 30)))
+    if sec == 54 and tick in (0, 150):                       # 500 Hz ticks for a while
+        host.send(P.Config(500 if tick == 0 else 300, 100, 2000, 0))
+    if sec == 56 and tick == 0:                              # the device resets (brown-out)
+        over["reset"] = True
+    if sec == 56 and tick == 30:
+        host.send(P.Hv(1))
+    if sec == 58 and tick < 12:                              # the encoder fails: position lost
+        over["encoder_ok"] = False
+    if sec == 58 and tick == 30:
+        host.send(P.Hv(1))
     return over
 
 
@@ -146,6 +160,10 @@ def run_lockstep(core_build, seconds: float = 60.0, seed: int = 1, reference: fl
             report.first_mismatch = (f"tick {k}: of {len(data)} host bytes the Python device "
                                      f"took {taken}, the C++ core {taken_cpp}")
             break
+        if over.pop("reset", False):
+            report.host_frames_dropped += fw.core.decoder.stats.dropped
+            fw.reset()
+            cpp.reset()
         sensors = fw.sensors()._replace(**over)
         now = int(round(fw.plant.t * 1e6))
         frames_cpp, out_cpp = cpp.tick(now, sensors)
@@ -158,7 +176,9 @@ def run_lockstep(core_build, seconds: float = 60.0, seed: int = 1, reference: fl
         report.frames += len(frames)
         report.bytes += sum(map(len, frames))
         report.switch_ons += int(fw.state.q and fw.state.on_since_us == now)
+        if k % 300 == 299:
+            report.speeds.append(float(fw.plant.wheel.s[2]))
         host.on_frames(frames, report)
-    report.host_frames_dropped = fw.core.decoder.stats.dropped
+    report.host_frames_dropped += fw.core.decoder.stats.dropped
     report.final_speed = float(fw.plant.wheel.s[2])
     return report
