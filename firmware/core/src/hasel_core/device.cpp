@@ -5,8 +5,10 @@
 namespace hasel {
 namespace {
 
-constexpr double kSector = 0.39269908169872414;   // pi/8 [rad]
-constexpr double kAngleSlack = 1e-6;              // section 6: float32(pi/8) > pi/8 by 4e-9
+// long double literals: a build with -fsingle-precision-constant (Teensyduino's) would round
+// unsuffixed ones to binary32, and the range check must be the host's, in double
+constexpr double kSector = double(0.392699081698724154807830422909937861L);   // pi/8 [rad]
+constexpr double kAngleSlack = double(1e-6L);   // section 6: float32(pi/8) > pi/8 by 4e-9
 
 int32_t floor_div(int32_t a, int32_t b) {
   int32_t q = a / b;
