@@ -18,7 +18,7 @@ from hasel_wheel_common import protocol as P
 from hasel_wheel_common.samples import as_received, from_device
 from hasel_wheel_mpc.closed_loop import controller_config
 from hasel_wheel_mpc.controller import SpeedController
-from hasel_wheel_sim.device_core import DeviceCore, Sensors
+from hasel_wheel_sim.device_core import DeviceCore
 from hasel_wheel_sim.device_cpp import CppDeviceCore, load_library
 from hasel_wheel_sim.firmware import Firmware
 from hasel_wheel_sim.params import WheelParams, packaged

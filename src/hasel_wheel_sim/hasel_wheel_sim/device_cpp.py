@@ -236,12 +236,6 @@ class CppDeviceCore:
         return (split_frames(C.string_at(self._tx, n)),
                 Outputs(o.active_mask, bool(o.hv_supply), o.telemetry_rate_hz))
 
-    def outputs(self) -> Outputs:
-        """The pad mask, HV supply and tick rate the device drives now."""
-        s = self.state()
-        mask = 1 << (s.eta_unwrapped % 16) if s.hv_enabled and s.q else 0
-        return Outputs(mask, s.hv_enabled, s.telemetry_rate_hz)
-
     def state(self) -> DeviceState:
         """The device state, as :class:`DeviceState`."""
         self.lib.hw_device_state(self._dev, C.byref(self._st))
@@ -255,11 +249,6 @@ class CppDeviceCore:
                            bool(st.q), st.eta_unwrapped, st.last_command_seq,
                            latched(st.pending), latched(st.target), st.telemetry_rate_hz,
                            st.watchdog_ms, st.max_on_ms, st.drain_mode)
-
-    def encoder(self) -> tuple[bool, int, int]:
-        """(started, unwrapped count, bad readings in a row) of the encoder track."""
-        self.lib.hw_device_state(self._dev, C.byref(self._st))
-        return bool(self._st.encoder_started), self._st.encoder_unwrapped, self._st.encoder_bad_run
 
 
 class CppDecoder:

@@ -14,7 +14,6 @@ from typing import Protocol
 
 from hasel_wheel_common import protocol as P
 
-from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.device_core import DeviceCore, DeviceState, Outputs, Sensors
 from hasel_wheel_sim.plant import ACTUATOR_CURRENT_A, HV_SUPPLY_V, Plant
 
@@ -97,8 +96,3 @@ class Firmware:
         self.plant.wheel.drive(None)
         self.outputs = Outputs()
         self.plant.step(None, self.tick_period)
-
-    @property
-    def speed(self) -> float:
-        """The wheel's true speed [rad/s]."""
-        return float(self.plant.wheel.s[L.S_XI2])
