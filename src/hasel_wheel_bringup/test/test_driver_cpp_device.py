@@ -13,7 +13,6 @@ from hasel_wheel_common.samples import as_received
 from hasel_wheel_driver.link import DriverCore, LinkConfig
 from hasel_wheel_mpc.closed_loop import controller_config
 from hasel_wheel_mpc.controller import SpeedController
-from hasel_wheel_sim.device_cpp import compiler_missing, default_build
 from hasel_wheel_sim.device_process import DeviceProcess
 from hasel_wheel_sim.params import packaged
 from hasel_wheel_sim.plant import load_plant_config
@@ -26,14 +25,6 @@ REFERENCE = 1.5               # [rad/s]
 W0 = 4.0
 #: the device's watchdog counts simulated time; scaled runs use the protocol's longest
 SCALED_CONFIG = P.Config(telemetry_rate_hz=300, watchdog_ms=1000, max_on_ms=2000, drain_mode=0)
-
-
-@pytest.fixture(scope="module")
-def firmware_build():
-    missing = compiler_missing()
-    if missing:
-        pytest.skip(f"the C++ firmware core needs {missing}; install g++ and cmake to run it")
-    return default_build()
 
 
 class Loop:

@@ -5,15 +5,6 @@ import pytest
 
 from hasel_wheel_common import protocol as P
 from hasel_wheel_bringup.lockstep import run_lockstep
-from hasel_wheel_sim.device_cpp import compiler_missing, default_build
-
-
-@pytest.fixture(scope="module")
-def firmware_build():
-    missing = compiler_missing()
-    if missing:
-        pytest.skip(f"the C++ firmware core needs {missing}; install g++ and cmake to run it")
-    return default_build()
 
 
 @pytest.mark.parametrize("seed", [1, 7])
