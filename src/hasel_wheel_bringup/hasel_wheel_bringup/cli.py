@@ -282,7 +282,12 @@ def cmd_virtual_teensy(args: argparse.Namespace) -> int:
     return 0
 
 
-def _add_device_core(p: argparse.ArgumentParser) -> None:
+def _add_virtual_teensy(p: argparse.ArgumentParser, plant: str) -> None:
+    """The virtual Teensy's options: its wheel, plant (default ``plant``), clock and core."""
+    p.add_argument("--initial-speed", type=float, default=2.0, help="[rad/s]")
+    p.add_argument("--time-scale", type=float, default=1.0, help="simulated seconds per wall second")
+    p.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
+    p.add_argument("--plant", default=str(packaged("hasel_wheel_sim", plant)))
     p.add_argument("--device-core", choices=("python", "cpp"), default="python",
                    help="the virtual Teensy's device logic: the Python reference or the C++ "
                         "firmware core built for this machine (needs cmake and g++)")
@@ -319,24 +324,16 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("link-run", help="host stack over a real pty against the virtual Teensy")
     r.add_argument("--out", default="out/link_run")
     r.add_argument("--seconds", type=float, default=60.0, help="simulated seconds")
-    r.add_argument("--time-scale", type=float, default=1.0, help="simulated seconds per wall second")
     r.add_argument("--phi-a-deg", type=float, default=3.0)
     r.add_argument("--phi-d-deg", type=float, default=22.0)
-    r.add_argument("--initial-speed", type=float, default=2.0, help="[rad/s]")
     r.add_argument("--corrupt", type=float, default=0.0, help="byte corruption probability")
-    r.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
-    r.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant.yaml")))
-    _add_device_core(r)
+    _add_virtual_teensy(r, "plant.yaml")
     r.set_defaults(func=cmd_link_run)
     v = sub.add_parser("virtual-teensy", help="serve the virtual Teensy on a pty until Ctrl-C "
                                               "(point driver_node's port at LINK)")
     v.add_argument("link", type=Path, help="path of the symlink to create, e.g. "
                                            "/tmp/usb-Teensyduino_HASEL_wheel-if00")
-    v.add_argument("--initial-speed", type=float, default=2.0, help="[rad/s]")
-    v.add_argument("--time-scale", type=float, default=1.0, help="simulated seconds per wall second")
-    v.add_argument("--wheel-params", default=str(packaged("hasel_wheel_sim", "wheel_params.yaml")))
-    v.add_argument("--plant", default=str(packaged("hasel_wheel_sim", "plant_realistic.yaml")))
-    _add_device_core(v)
+    _add_virtual_teensy(v, "plant_realistic.yaml")
     v.set_defaults(func=cmd_virtual_teensy)
     ident_cli.add_parsers(sub)
     bag_cli.add_parsers(sub)
