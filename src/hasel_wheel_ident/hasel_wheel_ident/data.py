@@ -13,6 +13,11 @@ phi_d      deactivation angle of the command in effect [rad] (nan when none)
 speed      measured speed [rad/s], optional (motion capture); None when absent
 =========  ==========================================================================
 
+and where the trial sits in its session (:mod:`.session`): ``session_start``, the session
+time [s] at t[0] (None when unknown), and ``prior``, the switch-ons the wheel went through
+before t[0] (in the trial's own clock), from which effects with memory (retained charge)
+start.
+
 From these it derives the unwrapped sector of the actuator of interest, the activations
 (runs of q = 1, each with its pad and angles) and the coast-down segments (no actuator
 scheduled and none on).
@@ -30,7 +35,7 @@ from hasel_wheel_sim.model import N_ACTUATORS, SECTOR
 
 #: CSV columns: required, and optional.
 CSV_REQUIRED = ("t", "angle", "q", "eta", "n_a", "phi_a", "phi_d")
-CSV_OPTIONAL = ("speed",)
+CSV_OPTIONAL = ("speed", "session_t")
 #: A coast-down segment must last at least this long [s] to be used for friction.
 MIN_COAST = 1.0
 #: Glitch rejection: a sample further than this from the line through its neighbours [rad].
@@ -66,6 +71,10 @@ class Trial:
     phi_d: np.ndarray
     speed: np.ndarray | None = None
     source: str = ""
+    #: session time [s] at t[0]; None when the recording does not say
+    session_start: float | None = None
+    #: (k, 3) switch-ons before t[0], in the clock of t: (on [s], off [s], pad 0..15)
+    prior: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     eta_unwrapped: np.ndarray = field(init=False)
     activations: list[Activation] = field(init=False)
     coasts: list[tuple[int, int]] = field(init=False)
@@ -94,6 +103,7 @@ class Trial:
                                         self.phi_a, self.phi_d, self.q)
         self.activations = find_activations(self)
         self.coasts = find_coasts(self)
+        self.prior = np.asarray(self.prior, dtype=float).reshape(-1, 3)
 
     @property
     def duration(self) -> float:
@@ -104,18 +114,51 @@ class Trial:
         """Median sample interval [s]."""
         return float(np.median(np.diff(self.t)))
 
+    def switch_ons(self, end: int | None = None) -> np.ndarray:
+        """(k, 3) the switch-ons of samples [0, end) (all when None) in the clock of t:
+        (on [s], off [s], pad 0..15).  Sample k's q holds until t[k + 1]; a run of q = 1
+        changes pad where eta_unwrapped does (:func:`on_intervals`)."""
+        stop = self.t.shape[0] if end is None else end
+        return on_intervals(self.t[:stop + 1], self.q[:stop], self.eta_unwrapped[:stop] % N_ACTUATORS)
+
     def slice(self, a: int, b: int, name: str | None = None) -> "Trial":
-        """Samples [a, b) as a trial of its own."""
+        """Samples [a, b) as a trial of its own; the switch-ons before a join its ``prior``."""
+        start = None if self.session_start is None else self.session_start + float(
+            self.t[a] - self.t[0])
+        prior = np.concatenate([self.prior, self.switch_ons(a)]) if a > 0 else self.prior
         return Trial(name or f"{self.name}[{a}:{b}]", self.t[a:b], self.angle[a:b], self.q[a:b],
                      self.eta[a:b], self.n_a[a:b], self.phi_a[a:b], self.phi_d[a:b],
-                     None if self.speed is None else self.speed[a:b], self.source)
+                     None if self.speed is None else self.speed[a:b], self.source, start, prior)
+
+
+def on_intervals(t: np.ndarray, q: np.ndarray, pad: np.ndarray) -> np.ndarray:
+    """(k, 3) the runs of q = 1 as (on [s], off [s], pad): ``q``, ``pad`` (n,) per sample,
+    ``t`` (n,) or (n + 1,) the sample times (with n + 1, the time at which sample n - 1's q
+    ends; with n, the last sample's q ends one median interval after it).  A run ends where
+    q falls or the pad changes."""
+    n = q.shape[0]
+    if n == 0:
+        return np.zeros((0, 3))
+    tt = t if t.shape[0] > n else np.append(t, t[-1] + (np.median(np.diff(t)) if n > 1 else 0.0))
+    on = q.astype(bool)
+    edge = np.empty(n, dtype=bool)
+    edge[0] = on[0]
+    edge[1:] = on[1:] & (~on[:-1] | (pad[1:] != pad[:-1]))
+    starts = np.flatnonzero(edge)
+    end = np.empty(n, dtype=bool)
+    end[-1] = on[-1]
+    end[:-1] = on[:-1] & (~on[1:] | (pad[1:] != pad[:-1]))
+    stops = np.flatnonzero(end) + 1
+    return np.column_stack([tt[starts], tt[stops], pad[starts].astype(float)])
 
 
 def hv_time(tr: Trial) -> np.ndarray:
-    """(n,) accumulated HV on-time [s] of the actuator of interest at each sample, counted
-    from the trial's start (the time each actuator has held HV so far)."""
+    """(n,) accumulated HV on-time [s] of the actuator of interest at each sample: the time
+    each actuator has held HV so far, in the session (the trial's ``prior`` switch-ons
+    first; from the trial's start when it has none)."""
     pad = tr.eta_unwrapped % N_ACTUATORS
-    acc = np.zeros(N_ACTUATORS)
+    acc = np.bincount(tr.prior[:, 2].astype(np.int64), weights=tr.prior[:, 1] - tr.prior[:, 0],
+                      minlength=N_ACTUATORS).astype(float)
     out = np.zeros(tr.t.shape[0])
     dt = np.diff(tr.t, append=tr.t[-1])
     for k in range(tr.t.shape[0]):
@@ -327,7 +370,9 @@ def read_csv(path: str | Path) -> Trial:
     """Read one trial from a CSV file with a header row (columns in any order).
 
     Columns: t [s], angle [rad], q (0/1), eta (0..15), n_a (0..15, or -1 when no actuator is
-    scheduled), phi_a [rad], phi_d [rad] (empty when n_a = -1), optional speed [rad/s].
+    scheduled), phi_a [rad], phi_d [rad] (empty when n_a = -1), optional speed [rad/s] and
+    session_t [s] (when the row ran in the session, on the clock of t: it places the trial
+    in its session, :mod:`.session`).
     Raises :class:`TrialError` naming the row (1 = header) and column at fault.
     """
     path = Path(path)
@@ -377,7 +422,7 @@ def read_csv(path: str | Path) -> Trial:
                     scheduled = x >= 0
                 data[c].append(x)
                 continue
-            if v == "" and c in ("phi_a", "phi_d", "speed"):
+            if v == "" and c in ("phi_a", "phi_d", "speed", "session_t"):
                 data[c].append(math.nan)
                 continue
             try:
@@ -399,13 +444,37 @@ def read_csv(path: str | Path) -> Trial:
     if len(data["t"]) < 30:
         raise TrialError(f"{path}: {len(data['t'])} data rows; a trial needs at least 30")
     a = {c: np.asarray(v, dtype=float) for c, v in data.items()}
+    start = _session_start(path, a["t"], a["session_t"]) if "session_t" in a else None
     return Trial(path.stem, a["t"], a["angle"], a["q"].astype(np.int8), a["eta"].astype(np.int64),
-                 a["n_a"].astype(np.int64), a["phi_a"], a["phi_d"], a.get("speed"), str(path))
+                 a["n_a"].astype(np.int64), a["phi_a"], a["phi_d"], a.get("speed"), str(path),
+                 start)
+
+
+#: How far session_t - t may wander within one file [s]: both count the same seconds.
+SESSION_CLOCK_TOL = 1e-3
+
+
+def _session_start(path: Path, t: np.ndarray, session_t: np.ndarray) -> float:
+    """The session time [s] at the first row, from the ``session_t`` column: every row must
+    have one, and it must run with t (session_t - t constant within
+    :data:`SESSION_CLOCK_TOL`)."""
+    bad = np.flatnonzero(~np.isfinite(session_t))
+    if bad.size:
+        raise TrialError(f"{path}: row {int(bad[0]) + 2}, column session_t: empty; the session "
+                         f"time [s] of every row is needed (or leave the column out)")
+    off = session_t - t
+    k = int(np.argmax(np.abs(off - off[0])))
+    if abs(off[k] - off[0]) > SESSION_CLOCK_TOL:
+        raise TrialError(f"{path}: row {k + 2}, column session_t: {session_t[k]!r} s does not run "
+                         f"with t (session_t - t is {off[k]:.6g} s here, {off[0]:.6g} s in row 2); "
+                         f"session_t is the session time [s] of each row, on the clock of t")
+    return float(session_t[0])
 
 
 def write_csv(trial: Trial, path: str | Path) -> None:
     """Write a trial in the CSV format :func:`read_csv` reads (nan angles as empty fields)."""
-    cols = list(CSV_REQUIRED) + (["speed"] if trial.speed is not None else [])
+    cols = list(CSV_REQUIRED) + (["speed"] if trial.speed is not None else []) + (
+        ["session_t"] if trial.session_start is not None else [])
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(cols)
@@ -415,12 +484,17 @@ def write_csv(trial: Trial, path: str | Path) -> None:
             row += ["" if math.isnan(x) else repr(float(x)) for x in (trial.phi_a[k], trial.phi_d[k])]
             if trial.speed is not None:
                 row.append(repr(float(trial.speed[k])))
+            if trial.session_start is not None:
+                row.append(repr(float(trial.session_start + (trial.t[k] - trial.t[0]))))
             w.writerow(row)
 
 
 # -- bags -------------------------------------------------------------------------------------
 def read_bag(path: str | Path) -> list[Trial]:
-    """Trials from a bag: one per namespace that has ``telemetry`` (and ``command``) topics.
+    """Trials from a bag: the recording of each namespace that has ``telemetry`` (and
+    ``command``) topics, cut into trials at the rests between them
+    (:func:`~.session.split_stream`); each trial's session time is the bag's clock (the
+    time its first telemetry message was recorded [s], plus the device time since).
 
     The command in effect at each sample is the one whose sequence number the telemetry
     reports as latched (``last_command_sequence``), else the latest one recorded at or before
@@ -428,8 +502,10 @@ def read_bag(path: str | Path) -> list[Trial]:
     """
     from hasel_wheel_bag import reader
     from hasel_wheel_common import topics
+    from hasel_wheel_ident.session import split_stream
 
     tel: dict[str, list] = {}
+    first: dict[str, float] = {}
     cmds: dict[str, dict[int, tuple[int, float, float]]] = {}
     timed: dict[str, list[tuple[float, int, float, float]]] = {}
     tel_suffix = "/" + topics.TELEMETRY.name
@@ -437,6 +513,7 @@ def read_bag(path: str | Path) -> list[Trial]:
     for topic, _t, m in reader.read_messages(path):
         if topic.endswith(tel_suffix):
             ns = topic[: -len(tel_suffix)]
+            first.setdefault(ns, _t * 1e-9)
             tel.setdefault(ns, []).append((m.device_time_us * 1e-6, m.angle, m.q, m.eta,
                                            m.last_command_sequence, m.hv_monitor))
         elif topic.endswith(cmd_suffix):
@@ -467,8 +544,10 @@ def read_bag(path: str | Path) -> list[Trial]:
                 if i >= 0:
                     n_a[k], pa[k], pd[k] = by_time[i][1:]
         name = (Path(path).name + ns.replace("/", "_")) if ns else Path(path).name
-        out.append(Trial(name, arr[:, 0], arr[:, 1], arr[:, 2].astype(np.int8),
-                         arr[:, 3].astype(np.int64), n_a, pa, pd, None, f"{path}{ns or ''}"))
+        whole = Trial(name, arr[:, 0], arr[:, 1], arr[:, 2].astype(np.int8),
+                      arr[:, 3].astype(np.int64), n_a, pa, pd, None, f"{path}{ns or ''}",
+                      first[ns])
+        out.extend(split_stream(whole))
     return out
 
 

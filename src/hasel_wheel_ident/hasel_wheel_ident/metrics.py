@@ -50,12 +50,14 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import signal
 
+from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import angle_readings
 from hasel_wheel_sim.params import WheelParams
 
 from hasel_wheel_ident.candidates import Candidate
 from hasel_wheel_ident.data import Trial, bridged_angle
 from hasel_wheel_ident.fit import FitResult, Problem
+from hasel_wheel_ident.session import prior_charge
 from hasel_wheel_ident.simulate import free_run
 from hasel_wheel_ident.threads import run_split
 
@@ -134,10 +136,12 @@ def simulate_ensemble(problem: Problem, theta: np.ndarray, trial: Trial,
     x1, x2, q = np.zeros((k, n)), np.zeros((k, n)), np.zeros((k, n))
     args = (np.array(eta), np.array(pa), np.array(pd), 0, on0)
     offset = float(extra.get("eta_offset", 0.0))
+    charge0 = prior_charge(trial, float(pv[L.P_RET_RECOVERY]))
 
     def run(rows: np.ndarray) -> None:
         for i in rows:
-            free_run(trial.t, *args, starts[i].copy(), offset, t_last_on, pv, x1[i], x2[i], q[i])
+            free_run(trial.t, *args, starts[i].copy(), offset, t_last_on, pv, charge0, x1[i],
+                     x2[i], q[i])
 
     run_split(run, np.array_split(np.arange(k), min(k, max(problem.threads, 2))))
     return angle_readings(x1, pv), q

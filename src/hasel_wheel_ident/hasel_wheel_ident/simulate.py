@@ -332,13 +332,15 @@ def charge_step(charge: float, on: float, h: float, recovery: float) -> float:
 
 
 @jit
-def retention_charge(t: np.ndarray, q: np.ndarray, pad: np.ndarray, recovery: float) -> np.ndarray:
+def retention_charge(t: np.ndarray, q: np.ndarray, pad: np.ndarray, recovery: float,
+                     charge0: np.ndarray) -> np.ndarray:
     """Retained charge Q [s of HV time] of the *active* actuator at each sample, shape (n,).
 
     Every actuator i accumulates dQ_i/dt = q_i - Q_i / recovery from the recorded switching
-    (q, pad = eta mod 16); the force of the active one is scaled by exp(-rate * Q).
+    (q, pad = eta mod 16), from ``charge0`` (16,) at t[0] (:func:`~.session.prior_charge`);
+    the force of the active one is scaled by exp(-rate * Q).
     """
-    charge = np.zeros(N_ACTUATORS)
+    charge = charge0.copy()
     out = np.zeros(t.shape[0])
     for k in range(t.shape[0]):
         out[k] = charge[pad[k]]
@@ -353,7 +355,8 @@ def retention_charge(t: np.ndarray, q: np.ndarray, pad: np.ndarray, recovery: fl
 @jit
 def free_run(t: np.ndarray, act_eta: np.ndarray, act_phi_a: np.ndarray, act_phi_d: np.ndarray,
              j0: int, on0: int, x0: np.ndarray, eta_offset: float, t_last_on: float,
-             pv: np.ndarray, out1: np.ndarray, out2: np.ndarray, out_q: np.ndarray) -> None:
+             pv: np.ndarray, charge0: np.ndarray, out1: np.ndarray, out2: np.ndarray,
+             out_q: np.ndarray) -> None:
     """Free run with model switching over the whole trial.
 
     act_* (m,): the recorded activations in order (unwrapped pad, phi_a, phi_d [rad]); j0 the
@@ -361,12 +364,13 @@ def free_run(t: np.ndarray, act_eta: np.ndarray, act_phi_a: np.ndarray, act_phi_
     at the first sample where the simulated contact angle reaches phi_a, and off where it
     reaches phi_d, both as the firmware sees it: the sensor's reading of xi1 (pv's
     eccentricity, :func:`~hasel_wheel_sim.model.angle_reading`) less eta pi/8; then the next one is pending.  Gains and retained charge follow the
-    simulated switching (pv's gains, retention rate and recovery).  Nothing switches on after
+    simulated switching (pv's gains, retention rate and recovery; the charge starts at
+    ``charge0`` (16,), :func:`~.session.prior_charge`).  Nothing switches on after
     ``t_last_on`` [s] (when the recording's last activation switched on), so a simulation
     that runs slower does not drive on past the recorded drive.  x0 = (xi1, xi2) at t[0].
     Writes xi1, xi2, q into out1, out2, out_q (n,).
     """
-    charge = np.zeros(N_ACTUATORS)
+    charge = charge0.copy()
     x1 = x0[0]
     x2 = x0[1]
     j = j0
