@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 import re
 import time
+from pathlib import Path
 
 from hasel_wheel_ident.numerics import pin_blas_kernels
 
@@ -323,6 +324,51 @@ def run_realistic() -> None:
               + ("; caution" if caution(C.BY_ID[cid], con) else ""))
 
 
+def run_sessions() -> None:
+    """Sessions of the five paper trials (order 5, 1, 9, 3, 7 deg, 20 s at rest between
+    them, plant seed 3) whose effects carry from one trial to the next, read from CSVs with
+    their session_t column and from one bag of the whole session: charge retention at two
+    rates (recovery 300 s), friction rising 25 % per 7 min, and one pad whose force falls to
+    0.15 between the second and the third trial; then a clean session."""
+    import tempfile
+    from hasel_wheel_ident.session import as_session
+    ret = lambda rate: {"charge_retention": {"enabled": True,                 # noqa: E731
+                                             "rate": {"value": rate, "unit": "1/s"},
+                                             "recovery": {"value": 300.0, "unit": "s"}}}
+    cases = [(f"retention {r:g}/s carried over", ret(r), S.SessionChanges(), ("rate", r))
+             for r in (0.02, 0.05)]
+    cases += [("friction +25 % per 7 min", {}, S.SessionChanges(friction_rate=0.25 / 420), None),
+              ("pad 5 falls to 0.15 before trial 3", {},
+               S.SessionChanges(step_pad=5, step_trial=2, step_factor=0.15), None),
+              ("clean session", {}, S.SessionChanges(), None)]
+    for label, effects, changes, truth in cases:
+        for via in ("csv", "bag"):
+            with tempfile.TemporaryDirectory() as tmp:
+                trials = S.session_trials(effects, changes, via=via, directory=Path(tmp))
+            t0 = time.perf_counter()
+            res = SEL.identify(trials, k_folds=5)
+            dt = time.perf_counter() - t0
+            before, after = res.nominal.sim_heldout_rmse, res.final.sim_heldout_rmse
+            line = (f"session, {label}, {via}: chosen {res.chosen or 'none'}; held-out "
+                    f"simulation error {before:.4f} -> {after:.4f} rad/s")
+            if truth is not None:
+                v = res.final.fit.values
+                ref = T.true_model_error(as_session(trials).trials, "charge_retention",
+                                         {"rate": truth[1], "recovery": 300.0})
+                line += (f" (true model {ref:.4f}); rate {v.get('rate', math.nan):.4g} (true "
+                         f"{truth[1]:g}), recovery {v.get('recovery', math.nan):.4g} (true 300)")
+            ft = res.friction_trend
+            if ft is not None and ft.significant:
+                line += f"; friction rate {ft.rate:.4g}/s (true {changes.friction_rate:.4g}/s)"
+            if res.gain_step is not None:
+                g = res.gain_step
+                line += (f"; step: pad {g.pad} before {g.trial}, gain {g.before:.3f} -> "
+                         f"{g.after:.3f} (true 1 -> {changes.step_factor:g})")
+            unx = [u.axis for u in (res.diagnostics_after.signatures
+                                    if res.diagnostics_after else [])]
+            print(line + f"; unexplained along {unx or 'nothing'}; {dt:.0f} s", flush=True)
+
+
 def main() -> None:
     import argparse
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -330,7 +376,12 @@ def main() -> None:
                     help="run only the closed loop on a COM plant (about a minute)")
     ap.add_argument("--outside-only", action="store_true",
                     help="run only the effects outside the library (about five minutes)")
+    ap.add_argument("--session-only", action="store_true",
+                    help="run only the sessions whose effects carry over (about 20 minutes)")
     args = ap.parse_args()
+    if args.session_only:
+        run_sessions()
+        return
     if args.outside_only:
         run_outside_library()
         return
@@ -342,6 +393,7 @@ def main() -> None:
         run_outside_library()
         run_restarted()
         run_realistic()
+        run_sessions()
     closed_loop_on_com()
 
 

@@ -85,6 +85,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
         print(f"  near miss, refused at the free-run bar: {near_miss_text(m)}")
     for u in data["unexplained"]:
         print(f"  unexplained: {u['text']}")
+    if data["session"]["gain_step"]:
+        print(f"  changed in the session: {data['session']['gain_step']['text']}")
     mb, ma = data["metrics"]["before"], data["metrics"]["after"]
     print(f"held-out simulation error {mb['simulation']['pooled_heldout_rmse_rad_s']:.4f} -> "
           f"{ma['simulation']['pooled_heldout_rmse_rad_s']:.4f} rad/s; held-out window error "

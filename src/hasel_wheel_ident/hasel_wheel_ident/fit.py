@@ -109,28 +109,38 @@ class FrictionEstimate:
     per_segment: list[float]
 
 
-def coastdown_friction(trials: list[Trial], base: WheelParams) -> FrictionEstimate | None:
-    """tau_f from every coast-down: angle = a + b t - alpha t^2 / 2 fitted by least squares.
+def coast_estimates(tr: Trial, base: WheelParams) -> list[tuple[int, int, float, float]]:
+    """(a, b, tau_f [N*m], its variance [(N*m)^2]) of each coast-down [a, b) of ``tr``:
+    angle = a + b t - alpha t^2 / 2 fitted by least squares; Coulomb friction alone
+    decelerates at alpha = (r + L)/L tau_f / (J/L) (eq. (38)), so
+    tau_f = alpha (J/L) L / (r + L)."""
+    out = []
+    factor = base.inertia * base.L / (base.r + base.L)
+    for a, b in tr.coasts:
+        t = tr.t[a:b] - tr.t[a]
+        y = tr.angle[a:b]
+        ok = clean_mask(t, y)
+        X = np.column_stack([np.ones(ok.sum()), t[ok], -0.5 * t[ok] ** 2])
+        coef, res, *_ = np.linalg.lstsq(X, y[ok], rcond=None)
+        dof = max(ok.sum() - 3, 1)
+        s2 = float(res[0]) / dof if res.size else 0.0
+        cov = s2 * np.linalg.inv(X.T @ X)
+        out.append((int(a), int(b), float(coef[2] * factor), float(cov[2, 2] * factor ** 2)))
+    return out
 
-    Coulomb friction alone decelerates at alpha = (r + L)/L tau_f / (J/L) (eq. (38)), so
-    tau_f = alpha (J/L) L / (r + L).  Segments are weighted by their information (t^4 n);
-    the interval combines the regression's own error with the scatter between segments.
-    None when the trials hold no coast-down.
+
+def coastdown_friction(trials: list[Trial], base: WheelParams) -> FrictionEstimate | None:
+    """tau_f from every coast-down (:func:`coast_estimates`), pooled.
+
+    Segments are weighted by their information (t^4 n); the interval combines the
+    regression's own error with the scatter between segments.  None when the trials hold no
+    coast-down.
     """
     est, var = [], []
     for tr in trials:
-        for a, b in tr.coasts:
-            t = tr.t[a:b] - tr.t[a]
-            y = tr.angle[a:b]
-            ok = clean_mask(t, y)
-            X = np.column_stack([np.ones(ok.sum()), t[ok], -0.5 * t[ok] ** 2])
-            coef, res, *_ = np.linalg.lstsq(X, y[ok], rcond=None)
-            dof = max(ok.sum() - 3, 1)
-            s2 = float(res[0]) / dof if res.size else 0.0
-            cov = s2 * np.linalg.inv(X.T @ X)
-            factor = base.inertia * base.L / (base.r + base.L)
-            est.append(coef[2] * factor)
-            var.append(cov[2, 2] * factor ** 2)
+        for _a, _b, e, v in coast_estimates(tr, base):
+            est.append(e)
+            var.append(v)
     if not est:
         return None
     e, v = np.asarray(est), np.maximum(np.asarray(var), 1e-30)
@@ -188,7 +198,7 @@ class Problem:
         self._out1 = np.zeros(self.n)
         self._out2 = np.zeros(self.n)
         self._every = np.arange(self.n_windows)
-        self._gains = ForceGains(self.layout)
+        self._gains = ForceGains(self.layout, self.trials)
 
     @property
     def n_windows(self) -> int:

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from hasel_wheel_sim.model import Extensions
 from hasel_wheel_sim.params import WheelParams
 
@@ -11,9 +13,12 @@ from hasel_wheel_ident.consistency import Consistency
 from hasel_wheel_ident.data import Trial
 from hasel_wheel_ident.evaluation import Evaluation
 from hasel_wheel_ident.fit import FrictionEstimate, Problem
+from hasel_wheel_ident.friction_trend import CoastFriction, FrictionTrend
 from hasel_wheel_ident.prediction import PredictionResidual
 from hasel_wheel_ident.residual import Diagnostics, Signature
 from hasel_wheel_ident.screen import Screening
+from hasel_wheel_ident.session import Session
+from hasel_wheel_ident.steps import GainStep, latest_gains
 
 
 @dataclass
@@ -47,6 +52,15 @@ class Identification:
     ran_on_from: Evaluation | None = None
     #: the free-run bar [1] the search judged with (``identify``'s ``min_gain``)
     min_gain: float = 0.10
+    #: the trials as a session: their order, start times and gaps (:mod:`.session`)
+    session: Session | None = None
+    #: tau_f of each coast-down in session order, and its trend along session time
+    #: (:mod:`.friction_trend`; None without three timed coast-downs)
+    coast_friction: list[CoastFriction] = field(default_factory=list)
+    friction_trend: FrictionTrend | None = None
+    #: a pad whose gain changed between two trials of a timed session (:mod:`.steps`); the
+    #: identified model takes its gain after the change
+    gain_step: GainStep | None = None
 
     @property
     def chosen(self) -> tuple[str, ...]:
@@ -59,7 +73,8 @@ class Identification:
 
     def model(self) -> tuple[WheelParams, Extensions, list[str]]:
         """The identified model as the plant and the MPC take it: (wheel parameters,
-        extensions, the chosen effects that have no field there and are left out)."""
+        extensions, the chosen effects that have no field there and are left out); a pad
+        whose gain stepped in the session at its gain after the step (:mod:`.steps`)."""
         prob = self.problem(self.chosen)
         params = prob.wheel_params(prob.full_theta(self.final.fit.theta))
         fields: dict = {}
@@ -73,4 +88,7 @@ class Identification:
                 left_out.append(c.id)
             else:
                 fields.update(c.extension(x))
+        if self.gain_step is not None and "gains" in fields:
+            fields["gains"] = tuple(float(g) for g in latest_gains(np.asarray(fields["gains"]),
+                                                                   self.gain_step))
         return params, Extensions(**fields), left_out

@@ -17,6 +17,18 @@ trials                     [{name, source, duration_s, samples, activations, coa
                             sample (no rest at the end, the whole record at rest, or too
                             little before it)
 friction                   {tau_f_N_m, ci95_N_m: [lo, hi], segments} or null (no coast-down)
+session                    {timed: the trials carried session times (then they are in
+                            session order and effects with memory carry over, session.py),
+                            warning: why not, or null, trials: [{name, start_s, gap_s,
+                            duration_s}] (start_s, gap_s null when not timed; gap_s null
+                            for the first), coast_friction: [{trial, session_t_s, tau_f_N_m,
+                            ci95_N_m}] each coast-down in session order, friction_trend:
+                            {tau_start_N_m, slope_N_m_per_s, slope_sd_N_m_per_s, p,
+                            rate_per_s (slope / tau_start), span_s, significant, text} or
+                            null (fewer than three timed coast-downs, friction_trend.py),
+                            gain_step: {pad, trial (the first after it), previous, before,
+                            after (gains relative to the median pad), before_ci95,
+                            after_ci95, p, text} or null (steps.py)}
 nominal                    {parameters: {name: {value, unit, ci95: [lo, hi]}},
                             wheel: {sigma1..sigma6, tau_f, brake_gain}}
 fits                       {nominal: F, final: F}, F = {converged, evaluations, message}:
@@ -334,6 +346,7 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
                    for tr in ident.trials],
         "friction": None if fr is None else {"tau_f_N_m": fr.tau_f,
                                              "ci95_N_m": list(fr.ci95), "segments": fr.segments},
+        "session": session_json(ident),
         "nominal": {"parameters": _params(ident.nominal, nominal_names),
                     "wheel": {k: json_number(getattr(wheel, k)) for k in
                               ("sigma1", "sigma2", "sigma3", "sigma4", "sigma5", "sigma6",
@@ -371,6 +384,34 @@ def to_json(ident: Identification, figures: list[str], left_out: list[str]) -> d
         "model_file": "model.yaml",
         "left_out_effects": left_out,
         "figures": figures,
+    }
+
+
+def session_json(ident: Identification) -> dict:
+    """The ``session`` key: the trials' order and gaps, friction per coast-down and its
+    trend, a pad's gain step."""
+    ses, tr, st = ident.session, ident.friction_trend, ident.gain_step
+    entries = [] if ses is None else ses.entries
+    return {
+        "timed": bool(ses is not None and ses.timed),
+        "warning": None if ses is None else ses.warning,
+        "trials": [{"name": e.name, "start_s": json_number(e.start), "gap_s": json_number(e.gap),
+                    "duration_s": json_number(e.duration)} for e in entries],
+        "coast_friction": [{"trial": c.trial, "session_t_s": json_number(c.session_t),
+                            "tau_f_N_m": json_number(c.tau_f),
+                            "ci95_N_m": [json_number(v) for v in c.ci95]}
+                           for c in ident.coast_friction],
+        "friction_trend": None if tr is None else {
+            "tau_start_N_m": json_number(tr.tau_start), "slope_N_m_per_s": json_number(tr.slope),
+            "slope_sd_N_m_per_s": json_number(tr.slope_sd), "p": json_number(tr.p),
+            "rate_per_s": json_number(tr.rate), "span_s": json_number(tr.span),
+            "significant": tr.significant, "text": tr.text()},
+        "gain_step": None if st is None else {
+            "pad": st.pad, "trial": st.trial, "previous": st.previous,
+            "before": json_number(st.before), "after": json_number(st.after),
+            "before_ci95": [json_number(v) for v in st.before_ci95],
+            "after_ci95": [json_number(v) for v in st.after_ci95], "p": json_number(st.p),
+            "text": st.text()},
     }
 
 

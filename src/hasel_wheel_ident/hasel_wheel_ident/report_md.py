@@ -63,6 +63,7 @@ def to_markdown(ident: Identification, data: dict, closed_loop: dict | None = No
     L += _result(ident, data)
     L += _errors(ident, nb, na)
     L += _friction(ident, data, nb, na)
+    L += _session(data["session"])
     L += _candidates(data)
     L += _residuals(ident)
     L += _closed_loop(closed_loop)
@@ -161,6 +162,28 @@ def _friction(ident: Identification, data: dict, nb: Evaluation, na: Evaluation)
     if data.get("identifiability"):
         L += ["Identifiability (singular values of the data's sensitivity to the paper's "
               "parameters, relative):", "", "```"] + data["identifiability"] + ["```", ""]
+    return L
+
+
+def _session(ses: dict) -> list[str]:
+    """The trials in session order, friction per coast-down and its trend, a gain step."""
+    L = ["## Session", ""]
+    if ses["warning"]:
+        L += [f"Warning: {ses['warning']}.", ""]
+    if ses["timed"]:
+        L += ["| trial | starts [s] | gap before [s] | duration [s] |", "|---|---|---|---|"]
+        L += [f"| {e['name']} | {e['start_s']:.1f} | "
+              f"{'–' if e['gap_s'] is None else format(e['gap_s'], '.1f')} | "
+              f"{e['duration_s']:.1f} |" for e in ses["trials"]] + [""]
+    if ses["coast_friction"]:
+        L += ["| coast-down of | session time [s] | τf [N·m] | 95 % CI |", "|---|---|---|---|"]
+        L += [f"| {c['trial']} | {'–' if c['session_t_s'] is None else format(c['session_t_s'], '.1f')}"
+              f" | {c['tau_f_N_m']:.6f} | {c['ci95_N_m'][0]:.6f} … {c['ci95_N_m'][1]:.6f} |"
+              for c in ses["coast_friction"]] + [""]
+    if ses["friction_trend"]:
+        L += [ses["friction_trend"]["text"] + ".", ""]
+    if ses["gain_step"]:
+        L += [ses["gain_step"]["text"] + ".", ""]
     return L
 
 

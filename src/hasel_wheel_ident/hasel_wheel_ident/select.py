@@ -20,11 +20,14 @@ from hasel_wheel_ident.candidates import LIBRARY, Candidate
 from hasel_wheel_ident.data import Trial
 from hasel_wheel_ident.evaluation import evaluate, folds_of
 from hasel_wheel_ident.fit import Problem, coastdown_friction
+from hasel_wheel_ident.friction_trend import coast_frictions, friction_trend
 from hasel_wheel_ident.identification import Identification
 from hasel_wheel_ident.prediction import prediction_residual
 from hasel_wheel_ident.reasons import InputRefused, Reason
 from hasel_wheel_ident.residual import analyse
 from hasel_wheel_ident.search import Search, Settings
+from hasel_wheel_ident.session import as_session
+from hasel_wheel_ident.steps import gain_step
 from hasel_wheel_ident.threads import with_one_blas_thread
 from hasel_wheel_ident.unexplained import describe_unexplained
 
@@ -36,7 +39,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
              threads: int = 2, analyse_residuals: bool = True,
              progress: Callable[[str], None] | None = None,
              short_fits: bool = True) -> Identification:
-    """Identify the model of ``trials`` (at least 2; ``k_folds`` >= 2 folds by trial):
+    """Identify the model of ``trials`` (at least 2; ``k_folds`` >= 2 folds by trial), taken
+    as one session (:func:`~.session.as_session`: in session order when they carry session
+    times, effects with memory carried from one to the next):
     windows of ``window`` [s], effects from ``library`` that cut the held-out simulation
     error by ``min_gain`` [1] or more, up to ``max_effects``.  ``short_fits``: screen the
     candidates of a bent fit by short fits from the reference force law too
@@ -47,10 +52,22 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     _check_inputs(trials, k_folds)
     say = _stopwatch(progress)
     base = base or WheelParams()
-    ident = _nominal(trials, base, window, k_folds, min_gain, threads, say)
+    session = as_session(trials)
+    if session.warning:
+        say(f"warning: {session.warning}")
+    ident = _nominal(session.trials, base, window, k_folds, min_gain, threads, say)
+    ident.session = session
+    ident.coast_friction = coast_frictions(session.trials, base)
+    ident.friction_trend = friction_trend(ident.coast_friction)
+    if ident.friction_trend is not None:
+        say(ident.friction_trend.text())
     settings = Settings(min_gain, max_effects, max_refits, threads, short_fits)
     search = Search(ident, library, settings, say)
     search.run()
+    if ident.session is not None and ident.session.timed:
+        ident.gain_step = gain_step(ident.consistency.get("gain_spread"))
+        if ident.gain_step is not None:
+            say(ident.gain_step.text())
     if analyse_residuals:
         _analyse(ident, say)
         describe_unexplained(ident, search.chosen, ident.final, search.refusals, min_gain,

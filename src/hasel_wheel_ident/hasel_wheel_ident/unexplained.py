@@ -13,6 +13,7 @@ from hasel_wheel_ident.data import Trial
 from hasel_wheel_ident.device_verdict import devices_verdict, lead_device
 from hasel_wheel_ident.evaluation import Evaluation
 from hasel_wheel_ident.fit import FitResult, wald_p
+from hasel_wheel_ident.friction_trend import FrictionTrend
 from hasel_wheel_ident.identification import Identification
 from hasel_wheel_ident.measuring_devices import (DEVICE_TREND_AXIS, DEVICE_WORDS, HV_LOSS,
                                                  ON_LAG, can_measure_beside, can_measure_lag,
@@ -68,6 +69,19 @@ def describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
     _size_beside(ident, chosen, measuring, say, threads)
     _set_apart_unconfirmed(ident, current)
     _note_what_it_is_not(ident, chosen, refusals)
+    trend = ident.friction_trend
+    if trend is not None and trend.significant:
+        ident.diagnostics_after.signatures.append(session_signature(trend, ident.base))
+
+
+def session_signature(trend: FrictionTrend, base: WheelParams) -> Signature:
+    """The friction trend ``trend`` as a signature along session time (axis
+    ``session_time``, unit s, not periodic): torque half the change of tau_f over the
+    coast-downs' span [N*m], amplitude the deceleration it makes, (r + L)/L tau / (J/L)
+    [rad/s^2]; the model has no effect for it, so it stays unexplained."""
+    torque = 0.5 * abs(trend.slope) * trend.span
+    amplitude = torque * (base.r + base.L) / base.L / base.inertia
+    return Signature("session_time", "s", None, amplitude, torque, trend.p, trend.text())
 
 
 def _measure_drift(ident: Identification, chosen: tuple[Candidate, ...], current: Evaluation,
