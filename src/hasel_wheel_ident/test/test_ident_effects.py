@@ -709,8 +709,13 @@ def test_the_report_carries_the_documented_keys_and_a_loadable_model(com_identif
     assert on_disk["chosen_effects"] == ["com_offset"] == data["chosen_effects"]
     for key in ("schema", "trials", "friction", "nominal", "effects", "candidates",
                 "near_misses", "unexplained", "metrics", "diagnostics", "paper_table3", "model_file",
-                "figures", "fits"):
+                "figures", "fits", "session"):
         assert key in on_disk
+    # trials without a session time: taken in the order given, the report says so
+    ses = on_disk["session"]
+    assert ses["timed"] is False and ses["warning"] and ses["gain_step"] is None
+    assert [c["session_t_s"] for c in ses["coast_friction"]] == [None] * len(
+        ses["coast_friction"]) and ses["friction_trend"] is None
     # every trial says what rest at its end the fits left out: these open-loop trials end in
     # a coast-down to rest, with nothing scheduled, so none is a stall
     for t in on_disk["trials"]:
