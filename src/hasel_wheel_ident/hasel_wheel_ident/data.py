@@ -75,6 +75,9 @@ class Trial:
     session_start: float | None = None
     #: (k, 3) switch-ons before t[0], in the clock of t: (on [s], off [s], pad 0..15)
     prior: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    #: the trial's friction over the model's tau_f [1]: 1 unless the coast-downs show
+    #: friction changing along the session (:func:`~.friction_trend.along_the_trend`)
+    friction_scale: float = 1.0
     eta_unwrapped: np.ndarray = field(init=False)
     activations: list[Activation] = field(init=False)
     coasts: list[tuple[int, int]] = field(init=False)
@@ -128,7 +131,8 @@ class Trial:
         prior = np.concatenate([self.prior, self.switch_ons(a)]) if a > 0 else self.prior
         return Trial(name or f"{self.name}[{a}:{b}]", self.t[a:b], self.angle[a:b], self.q[a:b],
                      self.eta[a:b], self.n_a[a:b], self.phi_a[a:b], self.phi_d[a:b],
-                     None if self.speed is None else self.speed[a:b], self.source, start, prior)
+                     None if self.speed is None else self.speed[a:b], self.source, start, prior,
+                     self.friction_scale)
 
 
 def on_intervals(t: np.ndarray, q: np.ndarray, pad: np.ndarray) -> np.ndarray:

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.model import N_ACTUATORS, angle_readings, param_vector
 from hasel_wheel_sim.params import WheelParams
 
@@ -199,6 +200,8 @@ class Problem:
         self._out2 = np.zeros(self.n)
         self._every = np.arange(self.n_windows)
         self._gains = ForceGains(self.layout, self.trials)
+        scale = np.array([tr.friction_scale for tr in self.trials])
+        self.friction_scale = None if np.all(scale == 1.0) else scale
 
     @property
     def n_windows(self) -> int:
@@ -286,9 +289,9 @@ class Problem:
         300 Hz aliases into slow errors that correlate with speed and bias the force law (by
         ~5 % in its peak)."""
         err = np.empty(self.n)
-        self._split(lambda part: shoot_errors(*self._inputs(eta, gains), part, x0, pv, self.y,
-                                              self._quantum_or_nan, self.ok, self._out1,
-                                              self._out2, err), self._every)
+        self._split_by_trial(lambda part, p: shoot_errors(
+            *self._inputs(eta, gains), part, x0, p, self.y, self._quantum_or_nan, self.ok,
+            self._out1, self._out2, err), self._every, pv)
         return err
 
     @property
@@ -309,13 +312,28 @@ class Problem:
         else:
             run_split(fn, [windows[i::self.threads] for i in range(self.threads)])
 
+    def _split_by_trial(self, fn: Callable[[np.ndarray, np.ndarray], None], windows: np.ndarray,
+                        pv: np.ndarray) -> None:
+        """``fn(part, pv)`` as :meth:`_split`; where the trials' friction differs
+        (``Trial.friction_scale``), each trial's windows apart with its own tau_f in pv."""
+        if self.friction_scale is None:
+            self._split(lambda part: fn(part, pv), windows)
+            return
+        of = self.window_trial[windows]
+        for j, scale in enumerate(self.friction_scale):
+            mine = windows[of == j]
+            if mine.size:
+                pj = pv.copy()
+                pj[L.P_FRICTION] *= scale
+                self._split(lambda part, pj=pj: fn(part, pj), mine)
+
     def _shoot_windows(self, eta: np.ndarray, gains: np.ndarray, windows: np.ndarray,
                        x0: np.ndarray, pv: np.ndarray, out1: np.ndarray,
                        out2: np.ndarray) -> None:
         """:func:`~.simulate.shoot_windows` of ``windows`` on this problem's data, split over
-        ``self.threads`` threads (:meth:`_split`)."""
-        self._split(lambda part: shoot_windows(*self._inputs(eta, gains), part, x0, pv, out1,
-                                               out2), windows)
+        ``self.threads`` threads (:meth:`_split_by_trial`)."""
+        self._split_by_trial(lambda part, p: shoot_windows(*self._inputs(eta, gains), part, x0,
+                                                           p, out1, out2), windows, pv)
 
     def solve_starts(self, full: np.ndarray, x0: np.ndarray, iterations: int = 12
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -348,9 +366,9 @@ class Problem:
         x0 = np.array(x0, dtype=float, order="C")   # a copy, solved in place
         r, d1, d2 = np.empty(self.n), np.empty(self.n), np.empty(self.n)
         scratch = np.empty(self.n), np.empty(self.n), np.empty(self.n)
-        self._split(lambda part: solve_window_starts(
-            *self._inputs(eta, gains), part, x0, pv, self.y, self._quantum_or_nan, self.ok,
-            iterations, r, d1, d2, *scratch), self._every)
+        self._split_by_trial(lambda part, p: solve_window_starts(
+            *self._inputs(eta, gains), part, x0, p, self.y, self._quantum_or_nan, self.ok,
+            iterations, r, d1, d2, *scratch), self._every, pv)
         return x0, r, d1, d2
 
     def _project(self, J: np.ndarray, d1: np.ndarray, d2: np.ndarray) -> np.ndarray:
@@ -383,9 +401,9 @@ class Problem:
             pv, extra = self.model(self.full_theta(tp))
             inputs = self._inputs(self.eta + extra.get("eta_offset", 0.0), self.gains(pv))
             col = J[:, j]
-            self._split(lambda part: shoot_quotients(
-                *inputs, part, x0, pv, self.y, self._quantum_or_nan, self.ok, r, h,
-                self._out1, self._out2, col), self._every)
+            self._split_by_trial(lambda part, p: shoot_quotients(
+                *inputs, part, x0, p, self.y, self._quantum_or_nan, self.ok, r, h,
+                self._out1, self._out2, col), self._every, pv)
         return self._project(J, d1, d2)
 
     # -- fitting ------------------------------------------------------------------------------

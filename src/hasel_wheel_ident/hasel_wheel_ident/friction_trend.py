@@ -6,13 +6,14 @@ the next; one tau_f pooled over the session hides it.  Each coast-down's tau_f
 (:func:`~.fit.coast_estimates`) is placed at the session time of its middle, and a
 weighted line tau_f = tau_0 + s t is fitted (weights: each estimate's inverse variance,
 widened by the scatter about the line beyond what the regressions expect, as the pooled
-estimate is).  The trend is reported when the slope's two-sided p < :data:`TREND_P`.
+estimate is).  The trend is reported when the slope's two-sided p < :data:`TREND_P`, and
+the fits then take each trial's friction from the line (:func:`along_the_trend`).
 Tested in ``test_ident_session.py``.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -66,12 +67,22 @@ class FrictionTrend:
         if not self.significant:
             return f"no friction trend along the session: {size}"
         text = f"friction {what} along the session: {size}"
-        text += ("; a warming bearing or a drying lubricant would do this, so the model's "
-                 "tau_f (pooled over the session) is too low for the late trials and too "
-                 "high for the early ones" if self.slope > 0 else
-                 "; a bearing running in or a lubricant spreading would do this, so the "
-                 "model's tau_f (pooled over the session) is too high for the late trials")
-        return text
+        text += ("; a warming bearing or a drying lubricant would do this" if self.slope > 0
+                 else "; a bearing running in or a lubricant spreading would do this")
+        return text + ("; the fits take each trial's tau_f from this line, and the model the "
+                       "latest trial's (the library has no effect for a drift)")
+
+
+def along_the_trend(trials: list[Trial], trend: FrictionTrend) -> list[Trial]:
+    """``trials`` (with session times) with the friction of ``trend`` at the middle of each,
+    relative to that at the middle of the last (``Trial.friction_scale`` [1]): the fits then
+    take tau_f of the latest trial, the wheel the controller will drive, and each trial's
+    friction from the line."""
+    def at(tr: Trial) -> float:
+        return trend.tau_start + trend.slope * (tr.session_start + 0.5 * tr.duration)
+
+    last = at(trials[-1])
+    return [replace(tr, friction_scale=at(tr) / last) for tr in trials]
 
 
 def coast_frictions(trials: list[Trial], base: WheelParams) -> list[CoastFriction]:

@@ -118,6 +118,9 @@ def simulate_ensemble(problem: Problem, theta: np.ndarray, trial: Trial,
     are shared over at least two threads of :func:`~.threads.window_pool`.
     Returns (xi1 (k, n) [rad] as the model's sensor reads it, q (k, n) 0/1)."""
     pv, extra = problem.model(problem.full_theta(theta))
+    if trial.friction_scale != 1.0:                  # friction along the session's trend
+        pv = pv.copy()
+        pv[L.P_FRICTION] *= trial.friction_scale
     acts = trial.activations
     eta = [float(a.eta) for a in acts]
     pa = [a.phi_a for a in acts]

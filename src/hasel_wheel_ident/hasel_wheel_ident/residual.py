@@ -33,6 +33,7 @@ from scipy import signal, stats
 from hasel_wheel_sim.model import N_ACTUATORS, SECTOR
 
 from hasel_wheel_ident.data import hv_time
+from hasel_wheel_ident.session_trend import SESSION_AXES, SessionDrift, session_drift
 from hasel_wheel_ident.fit import FitResult, Problem
 
 SG_WINDOW = 61          # samples (0.2 s at 300 Hz) of the Savitzky-Golay derivative
@@ -171,6 +172,8 @@ class Diagnostics:
     mask: np.ndarray | None = None
     defects: np.ndarray | None = None     # window continuity defects [rad/s^2]
     trend: Trend | None = None            # a significant steady change during the drive
+    #: a significant change from trial to trial along the session (:mod:`.session_trend`)
+    session: SessionDrift | None = None
 
 
 def acceleration_residual(problem: Problem, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -516,6 +519,8 @@ def analyse(problem: Problem, result: FitResult, max_lag: int = 60) -> Diagnosti
     diag.defects = acc
     if acc.size >= 20:
         diag.trend = drive_trend(problem, axes, acc, wins, trial_of)
+        diag.session = session_drift(problem.trials, acc, trial_of, TREND_SIGNIFICANCE,
+                                     MIN_AMPLITUDE)
         nuisance, cycles = scan_setup(problem, axes["time"], wins, trial_of, diag.trend)
         span = max(float(np.ptp(x1[problem.trial_slices[i]]))
                    for i in range(len(problem.trials)))
@@ -583,6 +588,11 @@ def signatures(diag: Diagnostics, inertia: float) -> list[Signature]:
     periodic_axes = {s.axis for s in out}
     if diag.trend is not None:
         out.append(trend_signature(diag.trend, inertia))
+    if diag.session is not None:
+        ses = diag.session
+        half = 0.5 * abs(ses.change)
+        out.append(Signature(ses.axis, SESSION_AXES[ses.axis][0], None, half, half * inertia,
+                             ses.p, ses.text(inertia)))
     described = {s.axis for s in out}
     for name, st in diag.structures.items():
         if st.p_value > SIGNIFICANCE or st.amplitude < MIN_AMPLITUDE or name in described:

@@ -20,7 +20,7 @@ from hasel_wheel_ident.candidates import LIBRARY, Candidate
 from hasel_wheel_ident.data import Trial
 from hasel_wheel_ident.evaluation import evaluate, folds_of
 from hasel_wheel_ident.fit import Problem, coastdown_friction
-from hasel_wheel_ident.friction_trend import coast_frictions, friction_trend
+from hasel_wheel_ident.friction_trend import along_the_trend, coast_frictions, friction_trend
 from hasel_wheel_ident.identification import Identification
 from hasel_wheel_ident.prediction import prediction_residual
 from hasel_wheel_ident.reasons import InputRefused, Reason
@@ -55,12 +55,13 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     session = as_session(trials)
     if session.warning:
         say(f"warning: {session.warning}")
-    ident = _nominal(session.trials, base, window, k_folds, min_gain, threads, say)
-    ident.session = session
-    ident.coast_friction = coast_frictions(session.trials, base)
-    ident.friction_trend = friction_trend(ident.coast_friction)
-    if ident.friction_trend is not None:
-        say(ident.friction_trend.text())
+    coasts = coast_frictions(session.trials, base)
+    trend = friction_trend(coasts)
+    if trend is not None:
+        say(trend.text())
+    ident = _nominal(along_the_trend(session.trials, trend) if trend and trend.significant
+                     else session.trials, base, window, k_folds, min_gain, threads, say)
+    ident.session, ident.coast_friction, ident.friction_trend = session, coasts, trend
     settings = Settings(min_gain, max_effects, max_refits, threads, short_fits)
     search = Search(ident, library, settings, say)
     search.run()

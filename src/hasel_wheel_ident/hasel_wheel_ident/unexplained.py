@@ -14,6 +14,7 @@ from hasel_wheel_ident.device_verdict import devices_verdict, lead_device
 from hasel_wheel_ident.evaluation import Evaluation
 from hasel_wheel_ident.fit import FitResult, wald_p
 from hasel_wheel_ident.friction_trend import FrictionTrend
+from hasel_wheel_ident.session_trend import SESSION_AXES
 from hasel_wheel_ident.identification import Identification
 from hasel_wheel_ident.measuring_devices import (DEVICE_TREND_AXIS, DEVICE_WORDS, HV_LOSS,
                                                  ON_LAG, can_measure_beside, can_measure_lag,
@@ -71,7 +72,10 @@ def describe_unexplained(ident: Identification, chosen: tuple[Candidate, ...],
     _note_what_it_is_not(ident, chosen, refusals)
     trend = ident.friction_trend
     if trend is not None and trend.significant:
-        ident.diagnostics_after.signatures.append(session_signature(trend, ident.base))
+        # the coast-downs name what the trials' change along the session only shows
+        sigs = ident.diagnostics_after.signatures
+        sigs[:] = [s for s in sigs if s.axis not in SESSION_AXES]
+        sigs.append(session_signature(trend, ident.base))
 
 
 def session_signature(trend: FrictionTrend, base: WheelParams) -> Signature:

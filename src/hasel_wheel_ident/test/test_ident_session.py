@@ -13,7 +13,8 @@ import pytest
 from hasel_wheel_ident import session as S
 from hasel_wheel_ident.consistency import Consistency
 from hasel_wheel_ident.data import Trial, TrialError, hv_time, read_csv, write_csv
-from hasel_wheel_ident.friction_trend import CoastFriction, friction_trend
+from hasel_wheel_ident.friction_trend import CoastFriction, along_the_trend, friction_trend
+from hasel_wheel_ident.session_trend import SESSION_AXES, session_drift
 from hasel_wheel_ident.simulate import retention_charge
 from hasel_wheel_ident.steps import MIN_STEP, gain_step, latest_gains
 
@@ -199,3 +200,39 @@ def test_a_pad_that_breaks_down_between_two_trials_is_named_with_its_gains_befor
 def test_no_step_or_one_below_the_smallest_named_is_not_reported(factor: float) -> None:
     assert factor < MIN_STEP and 1 / factor < MIN_STEP
     assert gain_step(_spread_refits(factor, at=2)) is None
+
+
+def _timed_session(m: int = 5) -> list[Trial]:
+    q, eta = _pushes(900, 30, 30)
+    return S.as_session([_trial(f"t{j}", q, eta, start=100.0 * j) for j in range(m)]).trials
+
+
+@pytest.mark.parametrize("slope", [0.0, 2e-4])
+def test_a_change_of_the_trials_defects_along_the_session_is_found_with_its_slope(
+        slope: float) -> None:
+    """Window defects [rad/s^2] with a mean that moves along session time by ``slope`` per
+    second: found with that slope (the HV time of these trials grows in step with session
+    time, so either axis may read it: its change over the session is the same), or nothing
+    for a steady mean."""
+    trials = _timed_session()
+    rng = np.random.default_rng(5)
+    mids = np.array([tr.session_start + 0.5 * tr.duration for tr in trials])
+    trial_of = np.repeat(np.arange(len(trials)), 40)
+    acc = 0.01 + slope * mids[trial_of] + 0.002 * rng.standard_normal(trial_of.size)
+    drift = session_drift(trials, acc, trial_of, 1e-4, 0.005)
+    if slope == 0.0:
+        assert drift is None
+        return
+    assert drift is not None and drift.axis in SESSION_AXES
+    assert drift.change == pytest.approx(slope * np.ptp(mids), rel=0.1)
+    untimed = [replace(tr, session_start=None) for tr in trials]
+    assert session_drift(untimed, acc, trial_of, 1e-4, 0.005) is None
+
+
+def test_the_fits_take_each_trials_friction_from_the_trend_relative_to_the_last() -> None:
+    trials = _timed_session(3)
+    trend = friction_trend(_coasts(0.0104 * 1e-3, n=3))
+    out = along_the_trend(trials, trend)
+    at = [trend.tau_start + trend.slope * (tr.session_start + 0.5 * tr.duration) for tr in out]
+    assert [tr.friction_scale for tr in out] == pytest.approx([a / at[-1] for a in at])
+    assert out[-1].friction_scale == 1.0 and out[0].friction_scale < 1.0
