@@ -53,3 +53,21 @@ def test_one_trial_is_refused_because_nothing_could_be_held_out(tmp_path, capsys
     write_csv(tr, tmp_path / "one.csv")
     assert main(["identify", str(tmp_path / "one.csv"), "--out", str(tmp_path / "r")]) == 2
     assert "at least 2 trials" in capsys.readouterr().err
+
+
+def test_trials_recorded_as_a_session_are_identified_in_session_order(tmp_path):
+    trials = tmp_path / "trials"
+    assert main(["trials", "--out", str(trials), "--phi-a-deg", "6", "2", "--drive", "12",
+                 "--coast", "6", "--session-gap", "5"]) == 0
+    paths = sorted(trials.glob("*.csv"), reverse=True)    # not the order they ran in
+    assert all("session_t" in p.read_text().splitlines()[0].split(",") for p in paths)
+    out = tmp_path / "report"
+    assert main(["identify", *map(str, paths), "--out", str(out), "--folds", "2",
+                 "--only", "viscous_drag", "--quiet"]) == 0
+    ses = json.loads((out / "report.json").read_text())["session"]
+    assert ses["timed"] is True and ses["warning"] is None
+    assert [t["name"] for t in ses["trials"]] == ["session1_phi_a_6deg", "session2_phi_a_2deg"]
+    assert ses["trials"][0]["gap_s"] is None
+    assert abs(ses["trials"][1]["gap_s"] - 5.0) <= 2 / 300      # the rest, to a sample
+    assert [c["trial"] for c in ses["coast_friction"]] == [t["name"] for t in ses["trials"]]
+    assert "## Session" in (out / "report.md").read_text()

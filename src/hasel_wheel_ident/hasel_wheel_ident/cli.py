@@ -97,14 +97,21 @@ def cmd_identify(args: argparse.Namespace) -> int:
 
 
 def cmd_trials(args: argparse.Namespace) -> int:
-    """Record the paper's five open-loop trials on a plant and write them as CSV files."""
+    """Record the paper's five open-loop trials on a plant and write them as CSV files (as one
+    session with ``--session-gap``)."""
     cfg = load_plant_config(args.plant) if args.plant else PlantConfig(switching="tick")
     base = load_wheel_params(args.wheel_params) if args.wheel_params else None
     specs = tuple(S.SyntheticTrial(math.radians(a), drive=args.drive, coast=args.coast)
                   for a in args.phi_a_deg)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    for tr in S.record_set(specs, base, cfg):
+    if args.session_gap is not None and not args.session_gap >= 0.0:
+        print(f"error: --session-gap {args.session_gap!r}: expected seconds >= 0",
+              file=sys.stderr)
+        return 2
+    trials = (S.record_set(specs, base, cfg) if args.session_gap is None else
+              S.record_session(specs, args.session_gap, base, cfg))
+    for tr in trials:
         write_csv(tr, out / f"{tr.name}.csv")
         print(f"{out / (tr.name + '.csv')}: {tr.duration:.1f} s")
     return 0
@@ -134,4 +141,8 @@ def add_parsers(sub) -> None:
     t.add_argument("--phi-a-deg", type=float, nargs="+", default=[1.0, 3.0, 5.0, 7.0, 9.0])
     t.add_argument("--drive", type=float, default=50.0, help="[s] driven, then --coast [s]")
     t.add_argument("--coast", type=float, default=10.0)
+    t.add_argument("--session-gap", type=float, default=None, metavar="S",
+                   help="[s] record the trials back to back on one plant as a session, S s at "
+                        "rest between them (the CSVs carry session_t); default: each trial "
+                        "on a fresh plant")
     t.set_defaults(func=cmd_trials)
