@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -53,31 +53,40 @@ def record(spec: SyntheticTrial, params: WheelParams | None = None,
     """Run one trial on a fresh plant (tick switching unless ``config`` says otherwise)."""
     config = config or PlantConfig(switching="tick")
     plant = Plant(params, config, xi1=0.0, xi2=spec.initial_speed)
+    c = _run(plant, spec)
+    return _trial(name or f"phi_a_{math.degrees(spec.phi_a):.0f}deg", c[:, 0], c)
+
+
+def _run(plant: Plant, spec: SyntheticTrial, log: "_BagLog | None" = None,
+         before_tick: Callable[[], None] | None = None) -> np.ndarray:
+    """(k, 7) the recorded rows (t, angle, q, eta, n_a, phi_a, phi_d) of ``spec`` run on
+    ``plant`` from its state: the firmware's schedule, braking, then HV off for the coast;
+    ``before_tick`` is called before every tick; lost samples are missing."""
     plant.open_loop(spec.phi_a, spec.phi_d, priming=spec.priming)
     n_drive = int(round(spec.drive / TICK))
     n_brake = int(round(spec.brake[0] / TICK)) if spec.brake else 0
     n = n_drive + n_brake + int(round(spec.coast / TICK))
-    cols = np.zeros((n, 7))
-    s = plant.wheel.s
-    k = 0
+    rows = []
     for i in range(n):
         if i == n_drive and n_brake:
             plant.open_loop(spec.brake[1], spec.brake[2], priming=0,
                             priming_phi_a=spec.brake[1])
         if i == n_drive + n_brake:
             plant.wheel.cut_hv()
-        sample = plant.step()
-        if sample is None:           # a dropped sample is simply missing from the log
-            continue
-        armed = s[L.S_ARMED] != 0.0
-        cols[k] = (sample.t, sample.angle, sample.q, sample.eta,
-                   int(s[L.S_ETA]) % 16 if armed else -1,
-                   s[L.S_PHI_A] if armed else math.nan, s[L.S_PHI_D] if armed else math.nan)
-        k += 1
-    c = cols[:k]
-    return Trial(name or f"phi_a_{math.degrees(spec.phi_a):.0f}deg", c[:, 0], c[:, 1],
-                 c[:, 2].astype(np.int8), c[:, 3].astype(np.int64), c[:, 4].astype(np.int64),
-                 c[:, 5], c[:, 6], None, "plant simulator")
+        if before_tick is not None:
+            before_tick()
+        row = _take(plant, log)
+        if row is not None:
+            rows.append(row)
+    return np.asarray(rows, dtype=float).reshape(-1, 7)
+
+
+def _trial(name: str, t: np.ndarray, c: np.ndarray, session_start: float | None = None
+           ) -> Trial:
+    """A trial of the rows ``c`` (:func:`_run`) on the clock ``t`` [s]."""
+    return Trial(name, t, c[:, 1], c[:, 2].astype(np.int8), c[:, 3].astype(np.int64),
+                 c[:, 4].astype(np.int64), c[:, 5], c[:, 6], None, "plant simulator",
+                 session_start)
 
 
 @dataclass(frozen=True)
@@ -115,32 +124,19 @@ def record_session(specs=SESSION_SET, gap: float = 20.0, params: WheelParams | N
     wheel = plant.wheel
     tau0 = float(wheel.pv[L.P_FRICTION])
     log = None if recorder is None else _BagLog(recorder, ns)
+
+    def drift() -> None:                        # the friction at this tick's session time
+        wheel.pv[L.P_FRICTION] = tau0 * (1.0 + changes.friction_rate * plant.t)
+
     out = []
     for k, spec in enumerate(specs):
         if changes.step_pad is not None and k == changes.step_trial:
             wheel.pv[L.P_GAINS + changes.step_pad] *= changes.step_factor
         wheel.s[L.S_XI2] = spec.initial_speed
         wheel.s[L.S_ETA] = math.floor(wheel.s[L.S_XI1] / SECTOR)   # the pad in contact
-        plant.open_loop(spec.phi_a, spec.phi_d, priming=spec.priming)
-        n_drive = int(round(spec.drive / TICK))
-        n_brake = int(round(spec.brake[0] / TICK)) if spec.brake else 0
-        n = n_drive + n_brake + int(round(spec.coast / TICK))
-        cols = []
-        for i in range(n):
-            if i == n_drive and n_brake:
-                plant.open_loop(spec.brake[1], spec.brake[2], priming=0,
-                                priming_phi_a=spec.brake[1])
-            if i == n_drive + n_brake:
-                wheel.cut_hv()
-            wheel.pv[L.P_FRICTION] = tau0 * (1.0 + changes.friction_rate * plant.t)
-            row = _take(plant, log)
-            if row is not None:
-                cols.append(row)
-        c = np.asarray(cols)
-        out.append(Trial(f"session{k + 1}_phi_a_{math.degrees(spec.phi_a):.0f}deg",
-                         c[:, 0] - c[0, 0], c[:, 1], c[:, 2].astype(np.int8),
-                         c[:, 3].astype(np.int64), c[:, 4].astype(np.int64), c[:, 5], c[:, 6],
-                         None, "plant simulator", float(c[0, 0])))
+        c = _run(plant, spec, log, drift)
+        out.append(_trial(f"session{k + 1}_phi_a_{math.degrees(spec.phi_a):.0f}deg",
+                          c[:, 0] - c[0, 0], c, float(c[0, 0])))
         if k + 1 < len(specs):
             wheel.s[L.S_XI2] = 0.0                       # held at rest through the gap
             for _ in range(int(round(gap / TICK))):
