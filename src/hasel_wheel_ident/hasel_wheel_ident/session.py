@@ -39,8 +39,9 @@ class SessionEntry:
 
 @dataclass(frozen=True)
 class Session:
-    """Trials in session order, with their entries; ``timed`` False when no trial carried a
-    session time (then the order is the order given and ``warning`` says so)."""
+    """Trials in session order, with their entries; ``timed`` False when the trials cannot
+    be placed in one session (no session time for some or all, or overlapping ones): then
+    the order is the order given and ``warning`` says why (None for a single trial)."""
 
     trials: list[Trial]
     entries: list[SessionEntry]
