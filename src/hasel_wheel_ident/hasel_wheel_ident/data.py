@@ -122,7 +122,8 @@ class Trial:
         (on [s], off [s], pad 0..15).  Sample k's q holds until t[k + 1]; a run of q = 1
         changes pad where eta_unwrapped does (:func:`on_intervals`)."""
         stop = self.t.shape[0] if end is None else end
-        return on_intervals(self.t[:stop + 1], self.q[:stop], self.eta_unwrapped[:stop] % N_ACTUATORS)
+        return on_intervals(self.t[:stop + 1], self.q[:stop],
+                            self.eta_unwrapped[:stop] % N_ACTUATORS)
 
     def slice(self, a: int, b: int, name: str | None = None) -> "Trial":
         """Samples [a, b) as a trial of its own; the switch-ons before a join its ``prior``."""

@@ -172,19 +172,23 @@ def _session(ses: dict) -> list[str]:
         L += [f"Warning: {ses['warning']}.", ""]
     if ses["timed"]:
         L += ["| trial | starts [s] | gap before [s] | duration [s] |", "|---|---|---|---|"]
-        L += [f"| {e['name']} | {e['start_s']:.1f} | "
-              f"{'–' if e['gap_s'] is None else format(e['gap_s'], '.1f')} | "
+        L += [f"| {e['name']} | {e['start_s']:.1f} | {_or_dash(e['gap_s'])} | "
               f"{e['duration_s']:.1f} |" for e in ses["trials"]] + [""]
     if ses["coast_friction"]:
         L += ["| coast-down of | session time [s] | τf [N·m] | 95 % CI |", "|---|---|---|---|"]
-        L += [f"| {c['trial']} | {'–' if c['session_t_s'] is None else format(c['session_t_s'], '.1f')}"
-              f" | {c['tau_f_N_m']:.6f} | {c['ci95_N_m'][0]:.6f} … {c['ci95_N_m'][1]:.6f} |"
+        L += [f"| {c['trial']} | {_or_dash(c['session_t_s'])} | {c['tau_f_N_m']:.6f} | "
+              f"{c['ci95_N_m'][0]:.6f} … {c['ci95_N_m'][1]:.6f} |"
               for c in ses["coast_friction"]] + [""]
     if ses["friction_trend"]:
         L += [ses["friction_trend"]["text"] + ".", ""]
     if ses["gain_step"]:
         L += [ses["gain_step"]["text"] + ".", ""]
     return L
+
+
+def _or_dash(x: float | None) -> str:
+    """``x`` to one decimal, or a dash for None."""
+    return "–" if x is None else f"{x:.1f}"
 
 
 def _candidates(data: dict) -> list[str]:
