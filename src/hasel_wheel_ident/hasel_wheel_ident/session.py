@@ -115,13 +115,6 @@ def prior_charge(tr: Trial, recovery: float) -> np.ndarray:
     return out
 
 
-def session_time(tr: Trial) -> np.ndarray:
-    """(n,) the session time [s] of every sample (the trial's own time from 0 when its
-    session time is unknown)."""
-    start = 0.0 if tr.session_start is None else tr.session_start
-    return start + (tr.t - tr.t[0])
-
-
 def split_stream(tr: Trial, min_gap: float = MIN_GAP) -> list[Trial]:
     """One recording of a session cut into its trials at the rests between them.
 
@@ -169,15 +162,3 @@ def _rests(tr: Trial, min_gap: float) -> list[tuple[int, int]]:
             out.append((k + 1, k + 1))
         k = j + 1
     return out
-
-
-def describe(session: Session) -> list[str]:
-    """One line per trial: its name, session start, gap since the last one and duration."""
-    lines = []
-    for e in session.entries:
-        if e.start is None:
-            lines.append(f"{e.name}: session time unknown, {e.duration:.1f} s")
-            continue
-        gap = "first" if e.gap is None else f"{e.gap:.1f} s after the last"
-        lines.append(f"{e.name}: starts at {e.start:.1f} s ({gap}), {e.duration:.1f} s")
-    return lines
