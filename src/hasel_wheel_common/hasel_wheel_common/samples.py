@@ -40,12 +40,18 @@ class TelemetrySample(NamedTuple):
 
 
 class Command(NamedTuple):
-    """Actuation input u = (n_a, phi_a [rad], phi_d [rad]) with its sequence number."""
+    """Actuation input u = (n_a, phi_a [rad], phi_d [rad]) with its sequence number.
+
+    ``now`` False: pad n_a switches on when its contact angle reaches phi_a (protocol COMMAND).
+    ``now`` True: pad n_a switches on at once if its contact angle already lies in
+    [phi_a, phi_d), which is how a standing wheel starts (protocol v1.1 START, docs/protocol.md).
+    """
 
     n_a: int
     phi_a: float
     phi_d: float
     sequence: int = 0
+    now: bool = False
 
     @property
     def mode(self) -> int:
@@ -144,7 +150,7 @@ def joint_state_msg(s: TelemetrySample, joint: str = "wheel_joint") -> dict:
 def command_msg(c: Command, t: float) -> dict:
     """hasel_wheel_msgs/msg/ActuationCommand as a dict."""
     return {"header": header(t, ""), "sequence": c.sequence, "n_a": c.n_a, "phi_a": c.phi_a,
-            "phi_d": c.phi_d, "mode": c.mode}
+            "phi_d": c.phi_d, "mode": c.mode, "now": bool(c.now)}
 
 
 def state_msg(t: float, xi1: float, xi2: float, q: int, act_counter: float,
