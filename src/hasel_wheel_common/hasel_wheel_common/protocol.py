@@ -26,6 +26,8 @@ COMMAND, HEARTBEAT, HV, ESTOP, CONFIG, CLEAR_ESTOP = 0x10, 0x11, 0x12, 0x13, 0x1
 
 # REJECT reasons
 R_N_A, R_ANGLE, R_ORDER, R_HV_DISABLED, R_ESTOP, R_CONFIG = 1, 2, 3, 4, 5, 6
+#: v1.1 START reasons: the pad is not in contact within [phi_a, phi_d); an actuator is on.
+R_NOT_IN_CONTACT, R_ACTUATOR_ON = 7, 8
 
 # fault flags (as in WheelTelemetry.msg)
 F_WATCHDOG, F_HV_MONITOR, F_OVERCURRENT, F_MAX_ON, F_ENCODER, F_REJECTED, F_ESTOP = \

@@ -149,6 +149,8 @@ class WheelLoop:
             return
         ref = reference_at(self.profile, s.t)
         r = self.ctrl.step(samples.as_received(s), ref)
+        if r.hv_off:             # the core gave up a stalled wheel: HV off, as the driver does
+            self.plant.wheel.cut_hv()
         rec, ns, log = self.recorder, self.ns, self.log
         if rec is not None:
             rec.telemetry(ns, s)

@@ -23,8 +23,11 @@ from hasel_wheel_sim.params import ParameterError, WheelParams
 from hasel_wheel_mpc.disturbance import ESTIMATOR_GATE, TRACKING_GAIN
 from hasel_wheel_mpc.mpc import MpcConfig
 from hasel_wheel_mpc.observer import ObserverConfig
+from hasel_wheel_mpc.start_policy import StartConfig
 
 SPEED_SOURCES = ("observer", "finite_difference")
+#: Sections of the configuration's YAML form (every one optional when read).
+SECTIONS = ("model", "observer", "mpc", "estimator", "speed_source", "start")
 ESTIMATOR_MODES = ("tracking", "paper")
 
 
@@ -34,7 +37,7 @@ class ControllerConfig:
 
     ``estimator_gain`` None: no disturbance estimator.  ``speed_source`` 'observer' or
     'finite_difference' (what the MPC sees as xi2; with the finite difference the observer's
-    disturbance is not used either).
+    disturbance is not used either).  ``start``: the start and stall policies.
     """
 
     params: WheelParams = field(default_factory=WheelParams)
@@ -45,6 +48,7 @@ class ControllerConfig:
     estimator_mode: str = "tracking"         # 'tracking' or 'paper' ((57)-(58))
     estimator_gate: float = ESTIMATOR_GATE   # [rad/s]
     speed_source: str = "observer"
+    start: StartConfig = field(default_factory=StartConfig)
 
     def __post_init__(self) -> None:
         if self.speed_source not in SPEED_SOURCES:
@@ -70,7 +74,8 @@ class ControllerConfig:
                 "mpc": _plain(dataclasses.asdict(self.mpc)),
                 "estimator": {"gain": self.estimator_gain, "mode": self.estimator_mode,
                               "gate": self.estimator_gate},
-                "speed_source": self.speed_source}
+                "speed_source": self.speed_source,
+                "start": _plain(dataclasses.asdict(self.start))}
         return yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
 
     @classmethod
@@ -83,12 +88,12 @@ class ControllerConfig:
     def from_mapping(cls, data: Any, where: str = "controller") -> "ControllerConfig":
         """Build from the mapping of :meth:`to_yaml` (every section optional)."""
         if not isinstance(data, Mapping):
-            raise ParameterError(f"{where}: expected a mapping with sections model, observer, "
-                                 f"mpc, estimator, speed_source; got {type(data).__name__}")
-        unknown = sorted(set(data) - {"model", "observer", "mpc", "estimator", "speed_source"})
+            raise ParameterError(f"{where}: expected a mapping with sections {list(SECTIONS)}; "
+                                 f"got {type(data).__name__}")
+        unknown = sorted(set(data) - set(SECTIONS))
         if unknown:
-            raise ParameterError(f"{where}: unknown section(s) {unknown}; expected model, "
-                                 f"observer, mpc, estimator, speed_source")
+            raise ParameterError(f"{where}: unknown section(s) {unknown}; expected "
+                                 f"{list(SECTIONS)}")
         kw: dict[str, Any] = {}
         if "model" in data:
             kw["params"], kw["extensions"] = model_from_mapping(data["model"], f"{where}: model")
@@ -96,6 +101,8 @@ class ControllerConfig:
             kw["observer"] = _dataclass_from(ObserverConfig, data["observer"], f"{where}: observer")
         if "mpc" in data:
             kw["mpc"] = _dataclass_from(MpcConfig, data["mpc"], f"{where}: mpc")
+        if "start" in data:
+            kw["start"] = _dataclass_from(StartConfig, data["start"], f"{where}: start")
         est = data.get("estimator") or {}
         unknown = sorted(set(est) - {"gain", "mode", "gate"})
         if unknown:
@@ -140,6 +147,8 @@ OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_ra
                    "pivot_rate")
 MPC_PARAMS = ("brake_threshold", "brake_phi_a", "brake_phi_d", "terminal_weight",
               "horizon_pads", "time_weighted", "deadline_margin", "max_horizon", "phi_a_min", "phi_a_max")
+#: mpc_node's ROS parameters that are fields of StartConfig.
+START_PARAMS = ("still_speed", "stall_time", "max_restarts")
 
 
 def _node_parameters(text: str, node: str, where: str) -> dict[str, Any]:
@@ -171,6 +180,7 @@ def controller_from_ros_files(observer_yaml: str, mpc_yaml: str,
     data: dict[str, Any] = {
         "observer": {k: obs[k] for k in OBSERVER_PARAMS if k in obs},
         "mpc": {k: mpc[k] for k in MPC_PARAMS if k in mpc},
+        "start": {k: mpc[k] for k in START_PARAMS if k in mpc},
         "estimator": {k: src[f"estimator_{k}"] for k in ("gain", "mode", "gate")
                       for src in (obs, mpc) if f"estimator_{k}" in src}}
     if data["estimator"].get("gain") == 0:

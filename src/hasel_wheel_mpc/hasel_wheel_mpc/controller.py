@@ -30,6 +30,7 @@ class ControlStep(NamedTuple):
     speed: float                 # xi2 the MPC sees [rad/s] (observer or finite difference)
     decision: Decision | None    # the MPC's decision at this sample, if it decided
     command: Command | None      # the command to send now (a decision's or a start command)
+    hv_off: bool = False         # the core gave up a stalled wheel: switch HV off now
 
 
 class SpeedController:
@@ -52,8 +53,8 @@ class SpeedController:
     def start(self, angle: float, speed: float) -> Command:
         """The first start command, sent before the first sample, for a wheel at ``angle``
         [rad] turning at ``speed`` [rad/s]."""
-        cmd = self.core.sent_start(self.core.start_command(angle, speed))
-        self.observer.command_sent(cmd.sequence, cmd.phi_a, cmd.phi_d)
+        cmd = self.core.sent_start(self.core.start_command(angle, speed), angle)
+        self.observer.command_sent(cmd.sequence, cmd.phi_a, cmd.phi_d, cmd.now)
         return cmd
 
     def step(self, s: TelemetrySample, reference: float) -> ControlStep:
@@ -63,5 +64,5 @@ class SpeedController:
         r = self.core.step(e, reference)
         if r.command is not None:
             c = r.command
-            self.observer.command_sent(c.sequence, c.phi_a, c.phi_d)
-        return ControlStep(e, r.d_before, r.d, r.speed, r.decision, r.command)
+            self.observer.command_sent(c.sequence, c.phi_a, c.phi_d, c.now)
+        return ControlStep(e, r.d_before, r.d, r.speed, r.decision, r.command, r.hv_off)

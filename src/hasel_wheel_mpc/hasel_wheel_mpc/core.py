@@ -1,8 +1,10 @@
-"""The control core: disturbance estimator, decision scheduling, start policy and MPC.
+"""The control core: disturbance estimator, decision scheduling, start, stall and pad
+policies, and the MPC.
 
 One :class:`ControlCore` object holds everything the speed loop decides after the observer:
 the estimator's cycle window and prediction queue, when the MPC decides (paper Sec. V-B),
-how a wheel is started, and which command angles each sequence number stands for.  The
+how a wheel is started and restarted (:mod:`.start_policy`), which pads still push
+(:mod:`.pad_health`), and which command angles each sequence number stands for.  The
 embedded runner (:class:`~hasel_wheel_mpc.controller.SpeedController`) and ``mpc_node`` both
 call it the same way, per device sample:
 
@@ -11,9 +13,9 @@ call it the same way, per device sample:
    it answers with a command to send, or None.
 
 Tests, without ROS: ``test_core.py`` (the start policy; the node path's commands equal to the
-embedded runner's through a start, a step up and a braking step down) and
-``test_controller.py`` (decision points; a step down braked at the next switch-on with d
-unchanged across it).
+embedded runner's through a start, a step up and a braking step down), ``test_controller.py``
+(decision points; a step down braked at the next switch-on with d unchanged across it) and
+``test_start_stall.py`` (from rest, through an obstacle, past a dead pad).
 """
 from __future__ import annotations
 
@@ -24,17 +26,23 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from hasel_wheel_common.samples import Command, PadEdges
-from hasel_wheel_sim.model import SECTOR
+from hasel_wheel_sim import layout as L
+from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, acceleration
 from hasel_wheel_sim.wheel import TICK
 
 from hasel_wheel_mpc.config import ControllerConfig
 from hasel_wheel_mpc.disturbance import IntegralEstimator
 from hasel_wheel_mpc.mpc import Decision, Mpc, next_pad
 from hasel_wheel_mpc.observer import Estimate, ObserverConfig
+from hasel_wheel_mpc.pad_health import PadHealth, PadVerdict
+from hasel_wheel_mpc.start_policy import GIVE_UP, RESTART, StallMonitor, StallVerdict
 
 #: (phi_a, phi_d) [rad] of the start command (sequence 0), and of any latched command whose
 #: sequence number the core did not send: the observer's angles for an unknown command.
 START_ANGLES = (ObserverConfig.default_phi_a, ObserverConfig.default_phi_d)
+#: (phi_a, phi_d) [rad] window of a START (protocol v1.1) for a standing wheel: the pad in
+#: contact, wherever it is in its sector; it switches off at the sector's end.
+START_NOW_WINDOW = (0.0, SECTOR)
 #: Decide on an idle wheel after this many samples with HV off [samples].
 IDLE_SAMPLES = 150
 #: Re-decide on a new reference only if the next switching is at least this far away [s].
@@ -54,6 +62,19 @@ ANGLES_KEPT = 64
 SWITCH_ON, IDLE, NEW_REFERENCE, BETWEEN_PADS = "switch_on", "idle", "new_reference", "between_pads"
 #: Why the core sends a start command (:attr:`CoreStep.why` while the wheel is not started).
 START = "start"
+#: :attr:`CoreStep.why` once the core has given up a stalled wheel (HV off, no commands).
+STALLED = "stalled"
+
+
+class CoreStatus(NamedTuple):
+    """The core's health for ``/diagnostics``: ``level`` 0 OK, 1 WARN, 2 ERROR; ``code``
+    one of 'ok', 'starting', 'restarting', 'pad_dead', 'stalled'; ``pads`` the pads it
+    concerns (0..15); ``text`` the message."""
+
+    level: int
+    code: str
+    pads: tuple[int, ...]
+    text: str
 
 
 def decision_point(reference_changed: bool, q: int, switched_on: bool, idle: int,
@@ -115,16 +136,22 @@ class CoreStep(NamedTuple):
     d_before: float              # the estimator's d [rad/s] when the estimate arrived
     d: float                     # d [rad/s] after this estimate (changes at switch-offs)
     speed: float                 # xi2 the MPC sees [rad/s] (observer or finite difference)
+    hv_off: bool = False         # the core gave up a stalled wheel: switch HV off now
 
 
 class ControlCore:
     """Disturbance estimator, decision scheduling, start policy and MPC of one wheel.
 
-    The MPC decides where :func:`decision_point` says.  Until the first switch-on, at every
-    other sample the core sends a start command (sequence 0, the pad whose activation angle
-    ``START_ANGLES[0]`` is next ahead of the encoder's angle and speed, at ``START_ANGLES``)
-    whenever no pad is latched within the next two sectors, at most every ``START_PERIOD``
-    samples.  The estimator updates at each switch-off of the actuator of
+    The MPC decides where :func:`decision_point` says.  Until the first switch-on (not a
+    START's: the MPC takes over at the switch-on after it, once the wheel rolls), at every
+    other sample the core sends a start command, at most every ``START_PERIOD`` samples: to a
+    standing wheel with no pad on, a START (``now``) of the pad in contact in the window
+    ``START_NOW_WINDOW``; otherwise, whenever no pad is latched within the next two sectors,
+    sequence 0 for the pad whose activation angle ``START_ANGLES[0]`` is next ahead of the
+    encoder's angle and speed, at ``START_ANGLES``.  A stalled wheel is restarted the same
+    way, and given up (HV off) after ``config.start.max_restarts`` restarts in a row
+    (:mod:`.start_policy`).  A pad found dead (:mod:`.pad_health`) is planned with its
+    measured gain and skipped.  The estimator updates at each switch-off of the actuator of
     interest from the mean speed over the cycle that ended and the prediction made for it.
     ``clock`` [s] is the MPC's clock for its deadline (default wall time).
     """
@@ -152,7 +179,14 @@ class ControlCore:
         self._fd = 0.0
         self._last_ref: float | None = None
         self._new_ref = False
-        self._start_idle = 0
+        self._samples = 0                  # estimates stepped [count]
+        self._start_sample = 0
+        self._start_now = False            # the last start command was a START
+        self.stall = StallMonitor(cfg.start)
+        self.gave_up: StallVerdict | None = None
+        self.pads = PadHealth()
+        self._base_gains = self.mpc.pv[L.P_GAINS:L.P_GAINS + N_ACTUATORS].copy()
+        self._on: tuple[int, float, float, bool] | None = None   # pad, t, speed, braking
 
     @property
     def d(self) -> float:
@@ -185,9 +219,30 @@ class ControlCore:
         self._latched = latched_sequence
 
     def start_command(self, angle: float, speed: float) -> Command:
-        """The start command for a wheel at ``angle`` [rad] turning at ``speed`` [rad/s]."""
+        """The start command for a wheel at ``angle`` [rad] turning at ``speed`` [rad/s]:
+        a START of the pad in contact (window ``START_NOW_WINDOW``) when the wheel stands
+        (slower than ``config.start.still_speed``), else sequence 0 at ``START_ANGLES``."""
+        if abs(speed) < self.config.start.still_speed:
+            return Command(contact_pad(angle), *START_NOW_WINDOW, 0, now=True)
         lead = self.mpc.config.deadline_margin + START_LEAD
         return Command(next_pad(angle, speed, START_ANGLES[0], lead), *START_ANGLES, 0)
+
+    def status(self) -> CoreStatus:
+        """The core's health now (:class:`CoreStatus`)."""
+        if self.gave_up is not None:
+            pad = self.gave_up.pad
+            return CoreStatus(2, STALLED, (pad,), f"stalled at pad {pad}: HV off after "
+                              f"{self.stall.restarts} restarts")
+        if self.pads.dead:
+            dead = tuple(sorted(self.pads.dead))
+            gains = ", ".join(f"pad {p} gain {self.pads.dead[p].gain:.2f}" for p in dead)
+            return CoreStatus(1, "pad_dead", dead, f"dead pads skipped: {gains}")
+        if self.stall.restarts:
+            return CoreStatus(1, "restarting", (), f"restart {self.stall.restarts} of "
+                              f"{self.config.start.max_restarts}")
+        if not self.started:
+            return CoreStatus(0, "starting", (), "starting the wheel")
+        return CoreStatus(0, "ok", (), "deciding")
 
     def step(self, e: Estimate, reference: float) -> CoreStep:
         """One estimate ``e`` (of the sample last given to :meth:`telemetry`) with the
@@ -195,16 +250,31 @@ class ControlCore:
         d_before = self.d
         observer = self.config.speed_source == "observer"
         speed = e.xi2 if observer else self._fd
+        if self.gave_up is not None:
+            return CoreStep(None, STALLED, None, d_before, d_before, speed)
+        self._samples += 1
         self._cycle.append(speed)
         self._idle = 0 if e.q else self._idle + 1
         switched_on, switched_off = self._edges.step(e.q, e.eta_unwrapped)
         self._track_reference(reference)
         if switched_off:
             self._end_cycle(speed, reference)
+            self._pad_cycle(e, speed)
+        if switched_on:
+            self._on = (e.eta_unwrapped % N_ACTUATORS, e.t, speed,
+                        self.angles_of(self._latched)[0] < 0.0)
         d = self.d
-        self.started = self.started or bool(e.q)
-        why = decision_point(self._new_ref, e.q, switched_on, self._idle, self.idle_samples,
-                             e.act_counter, e.deact_counter, speed, self.redecide_min_time)
+        verdict = self._stall(e, speed, reference)
+        if verdict is not None and verdict.what == GIVE_UP:
+            self.gave_up = verdict
+            return CoreStep(None, STALLED, None, d_before, d, speed, hv_off=True)
+        start_pad = switched_on and self._start_now   # a START's pad: the start policy goes on
+        if start_pad:
+            self._start_now = False
+        self.started = self.started or (switched_on and not start_pad)
+        why = None if start_pad else decision_point(
+            self._new_ref, e.q, switched_on, self._idle, self.idle_samples, e.act_counter,
+            e.deact_counter, speed, self.redecide_min_time)
         if why is None and not self.started:
             cmd = self._start(e)
             return CoreStep(cmd, START if cmd else None, None, d_before, d, speed)
@@ -255,28 +325,79 @@ class ControlCore:
         while len(self._angles) > ANGLES_KEPT:
             self._angles.popitem(last=False)
 
-    def _start(self, e: Estimate) -> Command | None:
-        """The start policy's command at this estimate, or None: the encoder has not yet
-        spanned ``START_WINDOW`` (the start pad comes from the encoder, not from an observer
-        still converging), a pad is latched whose switch-on is within two sectors ahead or
-        passed by less than the wheel turns in ``START_LEAD`` (the estimate may lead the
-        wheel), or the last start command went out less than ``START_PERIOD`` samples ago
-        (it may still be on its way; re-aiming at once would make the target flip between
-        two pads)."""
+    def _encoder_speed(self) -> float | None:
+        """The wheel's speed [rad/s] over the encoder window, None until it spans
+        ``START_WINDOW`` (the start pad comes from the encoder, not from an observer still
+        converging)."""
         if len(self._encoder) < 2 or self._encoder[-1][0] - self._encoder[0][0] < START_WINDOW:
             return None
         (t0, a0), (t1, a1) = self._encoder[0], self._encoder[-1]
-        speed = (a1 - a0) / (t1 - t0)
-        if -max(speed, 0.0) * START_LEAD < e.act_counter <= 2.0 * SECTOR:
-            return None
-        if self.starts and self._idle - self._start_idle < START_PERIOD:
-            return None                                          # in flight
-        return self.sent_start(self.start_command(a1, speed))
+        return (a1 - a0) / (t1 - t0)
 
-    def sent_start(self, cmd: Command) -> Command:
-        """Record that the start command ``cmd`` goes out now (the embedded runner sends
-        the first one before the first sample); returns it."""
-        self._start_idle = self._idle
-        self._sent(cmd)
+    def _start(self, e: Estimate) -> Command | None:
+        """The start policy's command at this estimate, or None: the encoder has not yet
+        spanned ``START_WINDOW``, the last start command went out less than
+        ``START_PERIOD`` samples ago (it may still be on its way; re-aiming at once would
+        make the target flip between two pads), a pad is on, or (a rolling wheel) a pad is
+        latched whose switch-on is within two sectors ahead or passed by less than the wheel
+        turns in ``START_LEAD`` (the estimate may lead the wheel)."""
+        speed = self._encoder_speed()
+        if speed is None or (self.starts and self._samples - self._start_sample < START_PERIOD):
+            return None
+        if e.q or (abs(speed) >= self.config.start.still_speed
+                   and -max(speed, 0.0) * START_LEAD < e.act_counter <= 2.0 * SECTOR):
+            return None
+        angle = self._encoder[-1][1]
+        return self.sent_start(self.start_command(angle, speed), angle)
+
+    def sent_start(self, cmd: Command, angle: float) -> Command:
+        """Record that the start command ``cmd``, aimed at the encoder ``angle`` [rad], goes
+        out now (the embedded runner sends the first one before the first sample); returns
+        it.  A START's angles are kept as the pad's contact angle there (where it switches
+        on) and its phi_d."""
+        self._start_sample = self._samples
+        self._start_now = cmd.now
+        self._sent(cmd._replace(phi_a=angle - contact_sector(angle) * SECTOR) if cmd.now else cmd)
         self.starts += 1
         return cmd
+
+    def _stall(self, e: Estimate, speed: float, reference: float) -> StallVerdict | None:
+        """The stall monitor's verdict at this estimate; a restart hands the wheel back to
+        the start policy."""
+        enc = self._encoder_speed()
+        still = enc is not None and abs(enc) < self.config.start.still_speed
+        angle = self._encoder[-1][1] if self._encoder else e.xi1
+        verdict = self.stall.step(e.t, still, speed, reference, self.started, contact_pad(angle))
+        if verdict is not None and verdict.what == RESTART:
+            self.started = False
+        return verdict
+
+    def _pad_cycle(self, e: Estimate, speed: float) -> None:
+        """A pad switched off: its cycle's push goes to :attr:`pads`; a pad found dead is
+        planned with its measured gain and skipped from now on."""
+        if self._on is None:
+            return
+        pad, t_on, v_on, braking = self._on
+        self._on = None
+        if braking or e.t <= t_on:
+            return
+        coast = acceleration(e.xi1, max(speed, 1e-3), 0.0, 0.0, 0.0, 1.0, 0.0, self.mpc.pv, 1.0)
+        verdict = self.pads.cycle(pad, e.t, e.t - t_on, speed - v_on, coast)
+        if verdict is not None:
+            self.dead_pad(verdict)
+
+    def dead_pad(self, verdict: PadVerdict) -> None:
+        """Plan with ``verdict.pad``'s measured gain and stop driving it."""
+        self.mpc.pv[L.P_GAINS + verdict.pad] = self._base_gains[verdict.pad] * verdict.gain
+        self.mpc.skip.add(verdict.pad)
+
+
+def contact_sector(angle: float) -> int:
+    """Unwrapped sector of the pad in contact at the encoder ``angle`` [rad] (eq. (40)); a
+    reading on a sector boundary belongs to the sector it begins."""
+    return math.floor(angle / SECTOR + 1e-9)
+
+
+def contact_pad(angle: float) -> int:
+    """Index 0..15 of the pad in contact at the encoder ``angle`` [rad]."""
+    return contact_sector(angle) % N_ACTUATORS

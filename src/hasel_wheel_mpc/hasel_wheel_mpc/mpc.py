@@ -355,6 +355,8 @@ class Mpc:
         self.seq = 0
         self.decisions = 0
         self.deadline_misses = 0
+        #: Pads (0..15) the MPC does not drive: it targets the next pad after them instead.
+        self.skip: set[int] = set()
         allowed = self.cands[:, 0]          # within the actuation limits
         self.last_drive = (float(allowed[len(allowed) // 2]), max(self.config.phi_d))
         # load the compiled predictor now, so the first real decision is not the slow one
@@ -403,8 +405,9 @@ class Mpc:
         s[L.S_PHI_D] = phi_d_now
         s[L.S_THETA_ON] = eta_unwrapped * SECTOR + phi_a_now
         s[L.S_THETA_OFF] = eta_unwrapped * SECTOR + phi_d_now
+        target = self.target_pad(eta_unwrapped)
         s[L.S_PEND] = 1.0
-        s[L.S_PEND_NA] = float((eta_unwrapped + 1) % 16)
+        s[L.S_PEND_NA] = float(target % 16)
         if len(disturbance) == 5:
             middle = (eta_unwrapped + 0.5 * self.config.horizon_pads) * SECTOR + phi_d_now
             disturbance = fold_pivot(disturbance, middle, self.pv[L.P_PIVOT_RATIO])
@@ -413,14 +416,15 @@ class Mpc:
         # 2.5 sectors for one, more after a braking pad's switch-on (at -22 deg, a sector
         # earlier)
         pads = self.config.horizon_pads
-        to_go = max((pads + 1.5) * SECTOR, 1.25 * ((eta_unwrapped + 1 + pads) * SECTOR - xi1))
+        ahead = target - eta_unwrapped              # 1, or more past skipped pads
+        to_go = max((pads + ahead + 0.5) * SECTOR, 1.25 * ((target + pads) * SECTOR - xi1))
         horizon = min(self.config.max_horizon, to_go / max(xi2, 0.3))
         n_ticks = max(int(horizon / TICK), 10)
         cfg = self.config
         # a target that latches behind the wheel would wait a whole turn: keep the candidates
         # that can still switch on after the current pad switches off at phi_d_now (on an idle
         # wheel the command latches on arrival, and its pad is chosen to suit: next_pad)
-        floor = (earliest_phi_a(eta_unwrapped + 1, xi2, eta_unwrapped * SECTOR + phi_d_now)
+        floor = (earliest_phi_a(target, xi2, eta_unwrapped * SECTOR + phi_d_now)
                  if pad_on else -math.inf)
         cands = _at_least(self.cands, floor)
         costs, means, prefix = self._costs(s, pv, cands, n_ticks, reference, d)
@@ -448,9 +452,18 @@ class Mpc:
             pa = min(max(pa, floor), cfg.phi_a_max)
         else:
             self.last_drive = (pa, pd)
-        cmd = Command((eta_unwrapped + 1) % 16, pa, pd, self.seq)
+        cmd = Command(target % 16, pa, pd, self.seq)
         return Decision(cmd, float(means[best]) + d, float(costs[best]), n, dt, False, slack,
                         missed)
+
+    def target_pad(self, eta_unwrapped: int) -> int:
+        """The unwrapped pad the next driving command targets: the next one after
+        ``eta_unwrapped`` that is not in :attr:`skip` (``test_mpc.py::
+        test_a_skipped_pad_is_not_driven``)."""
+        target = eta_unwrapped + 1
+        while target % 16 in self.skip and target < eta_unwrapped + 16:
+            target += 1
+        return target
 
     @gc_paused
     def brake_now(self, xi1: float, xi2: float, d: float, act_counter: float) -> Decision:

@@ -47,7 +47,10 @@ class ObserverConfig:
     The disturbance coefficients walk slowly, so they hold the average of many pads rather
     than follow the last few, and the MPC's prediction, which takes them as given, does not
     scatter from cycle to cycle with the encoder's noise.  Their first values still come
-    quickly (``initial_disturbance_std``).
+    quickly (``initial_disturbance_std``).  They are not learnt while the wheel is surely
+    slower than ``learn_speed`` (its speed estimate plus three standard deviations): a slower wheel (starting, stalling) is moved by the start push
+    and held by static friction, which would teach them what a rolling wheel never feels
+    (``test_observer.py::test_a_standing_wheel_teaches_the_disturbance_nothing``).
     """
 
     accel_noise: float = 0.05       # std of white unmodelled acceleration [rad/s^2]
@@ -62,6 +65,8 @@ class ObserverConfig:
                                      # (c, a, b) [rad/s^2 per sqrt(s)]; 0 = no disturbance state
     pivot_rate: float = 0.005        # the same for the pivot harmonic (e, f) [rad/s^2 per
                                      # sqrt(s)]; 0 = none
+    learn_speed: float = 0.5        # the disturbance is learnt only at this speed or faster
+                                    # [rad/s]
     reacquire_after: int = 30       # this many outliers in a row mean the estimate lost the
                                     # wheel (started on a fast wheel, a long dropout): restart
                                     # from those samples' line fit [samples]; 0 = never
@@ -120,6 +125,9 @@ class Observer:
         self.pv = reading_param_vector(self.params, extensions)
         self._s = initial_state()          # scratch state for the flow: q, eta, phi_a, on-time
         self._commands: dict[int, tuple[float, float]] = {}
+        self._now: set[int] = set()        # sequence numbers of START commands
+        self.on_speed = math.inf           # speed estimate at the last switch-on [rad/s]
+        self.on_contact = 0.0              # contact angle read at the last switch-on [rad]
         self.x: np.ndarray | None = None    # (xi1 [rad], xi2 [rad/s], c, a, b, e, f [rad/s^2])
         self.P = np.zeros((N_STATES, N_STATES))
         self._pv = self.pv.copy()           # the model with the current a_d as a torque
@@ -136,9 +144,15 @@ class Observer:
         #: (nu [rad], its predicted variance [rad^2]) of the last update, None before the first
         self.innovation: tuple[float, float] | None = None
 
-    def command_sent(self, sequence: int, phi_a: float, phi_d: float) -> None:
-        """Tell the observer which (phi_a, phi_d) a command sequence number stands for."""
+    def command_sent(self, sequence: int, phi_a: float, phi_d: float, now: bool = False) -> None:
+        """Tell the observer which (phi_a, phi_d) [rad] a command sequence number stands for;
+        for a START (``now``) the pad's force law starts at its contact angle at switch-on,
+        which the observer takes from the reading there."""
         self._commands[sequence] = (phi_a, phi_d)
+        if now:
+            self._now.add(sequence)
+        else:
+            self._now.discard(sequence)
 
     def _angles(self, seq: int) -> tuple[float, float]:
         return self._commands.get(seq, (self.config.default_phi_a, self.config.default_phi_d))
@@ -182,6 +196,8 @@ class Observer:
         else:
             self._run = []
             k = h_p / s_inn
+            if abs(self.x[1]) + 3.0 * math.sqrt(self.P[1, 1]) < c.learn_speed:
+                k[2:] = 0.0              # surely slow: a_d is held (Joseph form stays valid)
             self.x = self.x + k * nu
             # Joseph form: keeps P symmetric positive definite with the tiny encoder variance
             a = np.eye(len(k))
@@ -191,6 +207,8 @@ class Observer:
         self.t = z.t
         if switched_on:              # also when the one q = 0 sample before it was lost
             self.on_since = z.t
+            self.on_speed = float(self.x[1])
+            self.on_contact = meas - z.eta_unwrapped * SECTOR
         self._prev = z
         return self._estimate(z)
 
@@ -216,10 +234,13 @@ class Observer:
     def _predict(self, dt: float, prev: TelemetrySample) -> None:
         s = self._s
         phi_a, _ = self._angles(prev.last_command_sequence)
+        if prev.last_command_sequence in self._now:
+            phi_a = self.on_contact
         s[L.S_Q] = prev.q
         s[L.S_ETA] = prev.eta_unwrapped
         s[L.S_PHI_A] = phi_a
         s[L.S_ON_TIME] = max(prev.t - self.on_since, 0.0) if prev.q else 0.0
+        s[L.S_ON_SPEED] = self.on_speed if prev.q else math.inf
         x = self.x
         x1, v1 = self._flow(x, dt, s)
         # Jacobian of the flow by central differences (the flow is smooth within a mode)

@@ -15,6 +15,9 @@ viscous_drag              axle torque -coefficient * xi2                        
 rise_lag                  force x (1 - exp(-t_on / time_constant))                    weaker pushes, lower speed
 platform_disturbance      axle torque torque * sin((r/L) xi1 + phase)                 ripple once per lap of the pivot
 angle_eccentricity        angle read as xi1 + amplitude * sin(xi1 + phase)            1/rev reading error, ~ speed
+start_push                a pad switched on at a slow wheel pushes (model.start_push)  a standing wheel can start
+pad_death                 pad i's force x gain from a set time on (a broken pad)      a weak sector, every turn
+obstacle                  extra Coulomb friction torque for a set time (a kerb)       the wheel slows or stops
 encoder                   10-bit quantisation (floor) plus Gaussian angle noise       measured angle error
 encoder_glitches          a sample's count replaced by a random one, probability p   isolated outliers
 dropouts                  a telemetry sample is lost, probability p                  missing samples
@@ -63,6 +66,28 @@ EFFECT_FIELDS: dict[str, dict[str, FieldSpec]] = {
                                doc="first-harmonic error of the angle reading (disc offset / radius)"),
         "phase": FieldSpec("rad", -math.pi, math.pi, True, True, doc="phase of the error"),
     },
+    "start_push": {
+        "torque": FieldSpec("N*m", 0.0, 1.0, low_closed=True, high_closed=True,
+                            doc="push of a pad switched on at a standing wheel"),
+        "stroke": FieldSpec("rad", 0.0, 1.0, high_closed=True, doc="travel over which it falls to 0"),
+        "speed": FieldSpec("rad/s", 0.0, 10.0, high_closed=True,
+                           doc="switch-on speed at and above which a pad does not push"),
+    },
+    "pad_death": {
+        "pad": FieldSpec("1", 0.0, 15.0, True, True, doc="index of the pad that fails (whole number)"),
+        "time": FieldSpec("s", 0.0, 1e6, low_closed=True, high_closed=True,
+                          doc="simulated time at which it fails"),
+        "gain": FieldSpec("1", 0.0, 1.0, low_closed=True, high_closed=True,
+                          doc="what is left of its force (0: none)"),
+    },
+    "obstacle": {
+        "time": FieldSpec("s", 0.0, 1e6, low_closed=True, high_closed=True,
+                          doc="simulated time at which the wheel meets it"),
+        "duration": FieldSpec("s", 0.0, math.inf, high_closed=False,
+                              doc="how long it holds the wheel back (inf: for good)"),
+        "torque": FieldSpec("N*m", 0.0, 1.0, high_closed=True,
+                            doc="Coulomb friction torque it adds at the axle"),
+    },
     "encoder": {
         "noise_std": FieldSpec("rad", 0.0, 0.1, low_closed=True, doc="Gaussian angle noise"),
     },
@@ -84,7 +109,9 @@ EFFECT_FIELDS: dict[str, dict[str, FieldSpec]] = {
 #: sensor's eccentricity, on whose reading the firmware switches; the others are the sensor
 #: noise and link effects, which only the plant has.
 DYNAMIC_EFFECTS = ("charge_retention", "gain_spread", "com_offset", "viscous_drag", "rise_lag",
-                   "platform_disturbance", "angle_eccentricity")
+                   "platform_disturbance", "angle_eccentricity", "start_push")
+#: Events the plant alone has, at a set time (a failure the controller must notice itself).
+EVENT_EFFECTS = ("pad_death", "obstacle")
 
 
 @dataclass(frozen=True)
@@ -122,6 +149,9 @@ class EffectsConfig:
             retention_recovery=self.get("charge_retention", "recovery", 300.0),
             angle_eccentricity=self.get("angle_eccentricity", "amplitude"),
             angle_eccentricity_phase=self.get("angle_eccentricity", "phase"),
+            start_torque=self.get("start_push", "torque"),
+            start_stroke=self.get("start_push", "stroke", Extensions.start_stroke),
+            start_speed=self.get("start_push", "speed", Extensions.start_speed),
             gains=gains,
         )
 
@@ -149,9 +179,11 @@ class EffectsConfig:
             "charge_retention": {"rate": ext.retention_rate, "recovery": ext.retention_recovery},
             "angle_eccentricity": {"amplitude": ext.angle_eccentricity,
                                    "phase": ext.angle_eccentricity_phase},
+            "start_push": {"torque": ext.start_torque, "stroke": ext.start_stroke,
+                           "speed": ext.start_speed},
         })
         enabled = self.enabled | {"com_offset", "platform_disturbance", "viscous_drag", "rise_lag",
-                                  "charge_retention", "angle_eccentricity"}
+                                  "charge_retention", "angle_eccentricity", "start_push"}
         return EffectsConfig(frozenset(enabled), values, tuple(float(g) for g in ext.gains))
 
 
@@ -192,8 +224,13 @@ def effects_from_mapping(data: Any, where: str = "effects") -> EffectsConfig:
     return EffectsConfig(frozenset(enabled), values, gains)
 
 
-#: Every effect switched on with representative values (used by ``--effects all`` and benchmarks).
+#: Every effect of a wheel switched on with representative values (used by ``--effects all``
+#: and benchmarks); the events (:data:`EVENT_EFFECTS`) stay off.  The start push is the
+#: Fig. 5 wheel of docs/model.md ("Start from rest").
 REALISTIC = {
+    "start_push": {"enabled": True, "torque": {"value": 0.05, "unit": "N*m"},
+                   "stroke": {"value": 0.2, "unit": "rad"},
+                   "speed": {"value": 0.5, "unit": "rad/s"}},
     "charge_retention": {"enabled": True, "rate": {"value": 0.01, "unit": "1/s"},
                          "recovery": {"value": 300.0, "unit": "s"}},
     "gain_spread": {"enabled": True, "std": {"value": 0.08, "unit": "1"}},

@@ -49,17 +49,18 @@ def rk4(xi1: float, xi2: float, h: float, s: np.ndarray, gain: float,
     eta = s[L.S_ETA]
     pa = contact_at_switch_on(eta, s[L.S_PHI_A], pv)
     t_on = s[L.S_ON_TIME]
+    w_on = s[L.S_ON_SPEED]
     hh = 0.5 * h
-    a1 = acceleration(xi1, xi2, q, eta, pa, gain, t_on, pv, fd)
+    a1 = acceleration(xi1, xi2, q, eta, pa, gain, t_on, pv, fd, w_on)
     x2 = xi1 + hh * xi2
     v2 = xi2 + hh * a1
-    a2 = acceleration(x2, v2, q, eta, pa, gain, t_on + hh, pv, fd)
+    a2 = acceleration(x2, v2, q, eta, pa, gain, t_on + hh, pv, fd, w_on)
     x3 = xi1 + hh * v2
     v3 = xi2 + hh * a2
-    a3 = acceleration(x3, v3, q, eta, pa, gain, t_on + hh, pv, fd)
+    a3 = acceleration(x3, v3, q, eta, pa, gain, t_on + hh, pv, fd, w_on)
     x4 = xi1 + h * v3
     v4 = xi2 + h * a3
-    a4 = acceleration(x4, v4, q, eta, pa, gain, t_on + h, pv, fd)
+    a4 = acceleration(x4, v4, q, eta, pa, gain, t_on + h, pv, fd, w_on)
     return (xi1 + h / 6.0 * (xi2 + 2.0 * v2 + 2.0 * v3 + v4),
             xi2 + h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4))
 
@@ -101,7 +102,8 @@ def _locate(s: np.ndarray, gain: float, pv: np.ndarray, h_max: float, x1: float,
             f = v
             df = acceleration(x, v, s[L.S_Q], s[L.S_ETA],
                               contact_at_switch_on(s[L.S_ETA], s[L.S_PHI_A], pv), gain,
-                              s[L.S_ON_TIME] + hg, pv, 1.0 if v0 > 0.0 else -1.0)
+                              s[L.S_ON_TIME] + hg, pv, 1.0 if v0 > 0.0 else -1.0,
+                              s[L.S_ON_SPEED])
         if which == 0 and abs(f) <= EVENT_TOL:
             return hg, x, v
         if which == 1 and abs(f) <= 1e-13:
@@ -195,6 +197,7 @@ def _switch(s: np.ndarray, pv: np.ndarray, ev: np.ndarray, n_ev: int) -> int:
     if s[L.S_Q] == 0.0:
         s[L.S_Q] = 1.0
         s[L.S_ON_TIME] = 0.0
+        s[L.S_ON_SPEED] = s[L.S_XI2]
         s[L.S_N_ON] += 1.0
         return _record(ev, n_ev, s, L.EV_ON)
     s[L.S_Q] = 0.0

@@ -33,7 +33,10 @@ P_BIAS_COS = P_BIAS_TORQUE + 1  #   plant; the observer and the MPC's prediction
 P_BIAS_SIN = P_BIAS_TORQUE + 2  #   observer's disturbance estimate here (c, a, b)
 P_READ_COS = P_BIAS_SIN + 1     # angle reading = xi1 + P_READ_COS cos(xi1) + P_READ_SIN sin(xi1)
 P_READ_SIN = P_BIAS_SIN + 2     #   [rad]: an eccentric angle sensor (0 = exact reading)
-P_SIZE = P_READ_SIN + 1
+P_START_TORQUE = P_READ_SIN + 1  # start push (model.start_push): axle torque [N*m] at switch-on,
+P_START_STROKE = P_READ_SIN + 2  #   travel [rad] over which it falls to 0, and the switch-on
+P_START_SPEED = P_READ_SIN + 3   #   speed [rad/s] at and above which there is none
+P_SIZE = P_START_SPEED + 1
 
 # ---- state vector ---------------------------------------------------------------------
 S_T = 0            # simulated time [s]
@@ -63,6 +66,7 @@ S_N_ON = 22        # switch-on events so far
 S_N_OFF = 23       # switch-off events so far
 S_MODE = 24        # 0 exact switching, 1 switching on firmware ticks
 S_ACT_TIME = 25    # accumulated HV on-time of all actuators [s]
+S_ON_SPEED = 26    # wheel speed at the current switch-on [rad/s] (inf: not known, no start push)
 S_RET = 32         # 16 charge-retention states Q_i [s]
 S_SIZE = S_RET + 16
 

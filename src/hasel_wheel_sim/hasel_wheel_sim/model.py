@@ -49,6 +49,12 @@ EXTENSION_FIELDS: dict[str, FieldSpec] = {
                                     doc="first-harmonic error of the angle reading"),
     "angle_eccentricity_phase": FieldSpec("rad", -math.pi, math.pi, True, True,
                                           doc="wheel angle where the reading error peaks is pi/2 - phase"),
+    "start_torque": FieldSpec("N*m", 0.0, 1.0, True, True,
+                              doc="push of a pad switched on at a standing wheel; 0 = none"),
+    "start_stroke": FieldSpec("rad", 0.0, 1.0, False, True,
+                              doc="wheel travel over which that push falls to 0"),
+    "start_speed": FieldSpec("rad/s", 0.0, 10.0, False, True,
+                             doc="switch-on speed at and above which a pad does not push"),
 }
 #: Unit and allowed range of each of the 16 actuator gains.
 GAIN_SPEC = FieldSpec("1", 0.0, 10.0, False, True, doc="per-actuator force gain")
@@ -72,6 +78,9 @@ class Extensions:
         xi1 + angle_eccentricity * sin(xi1 + phase) (an encoder disc or magnet off the axle).
         Not a torque: the firmware switches the actuators when its *reading* reaches the
         switching angle, and every recorded angle is a reading (:func:`angle_reading`).
+    ``start_torque`` [N*m], ``start_stroke`` [rad], ``start_speed`` [rad/s]: the push of a pad
+        switched on at a standing or slow wheel (:func:`start_push`), what starts a wheel
+        from rest (docs/model.md, "Start from rest").
     """
 
     com_torque: float = 0.0
@@ -84,6 +93,9 @@ class Extensions:
     retention_recovery: float = 300.0
     angle_eccentricity: float = 0.0
     angle_eccentricity_phase: float = 0.0
+    start_torque: float = 0.0
+    start_stroke: float = 0.1
+    start_speed: float = 0.5
     gains: tuple[float, ...] = field(default=(1.0,) * N_ACTUATORS)
 
     def __post_init__(self) -> None:
@@ -127,6 +139,9 @@ def param_vector(p: WheelParams, ext: Extensions | None = None) -> np.ndarray:
     # e sin(xi1 + phase) = e sin(phase) cos(xi1) + e cos(phase) sin(xi1)
     pv[L.P_READ_COS] = ext.angle_eccentricity * math.sin(ext.angle_eccentricity_phase)
     pv[L.P_READ_SIN] = ext.angle_eccentricity * math.cos(ext.angle_eccentricity_phase)
+    pv[L.P_START_TORQUE] = ext.start_torque
+    pv[L.P_START_STROKE] = ext.start_stroke
+    pv[L.P_START_SPEED] = ext.start_speed
     return pv
 
 
@@ -239,6 +254,34 @@ def force_law(xi_c: float, xi2: float, phi_a: float, pv: np.ndarray) -> float:
 
 
 @jit_inline
+def start_push(xi_c: float, phi_a: float, on_speed: float, pv: np.ndarray) -> float:
+    """Axle torque [N*m] with which a pad that is on pushes a standing or slow wheel (our
+    start model; docs/model.md, "Start from rest").
+
+        tau_s = P * (1 - |w_on| / w_s)^+ * clip(1 - (xi_c - phi_a) / Theta, 0, 1)
+
+    P = ``start_torque`` [N*m], Theta = ``start_stroke`` [rad], w_s = ``start_speed``
+    [rad/s], w_on [rad/s] the wheel speed when the pad switched on (``on_speed``; inf when not
+    known: no push), xi_c [rad] the contact angle and phi_a [rad] the contact angle at
+    switch-on, so xi_c - phi_a is the travel since.  The expanding pad pushes with P at first
+    and with nothing once the wheel has rolled Theta; a pad switched on at w_s or faster does
+    not push at all, so (43) alone describes a rolling wheel.  Only driving pads (phi_a >= 0)
+    push.  From rest with (43) switched off, the wheel rolls 2 Theta (1 - T_f / P) for
+    T_f < P <= 2 T_f and P Theta / (2 T_f) for P >= 2 T_f (work of the push = work of
+    friction; T_f the friction torque at the axle):
+    ``test_model.py::test_a_pad_switched_on_at_rest_rolls_the_wheel_as_far_as_its_work_allows``.
+    """
+    p = pv[L.P_START_TORQUE]
+    if p == 0.0 or phi_a < 0.0:
+        return 0.0
+    slow = 1.0 - abs(on_speed) / pv[L.P_START_SPEED]
+    left = 1.0 - (xi_c - phi_a) / pv[L.P_START_STROKE]
+    if slow <= 0.0 or left <= 0.0:
+        return 0.0
+    return p * slow * min(left, 1.0)
+
+
+@jit_inline
 def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
     """Axle torque [N*m] of the extensions that do not involve the actuators (0 when off)."""
     tau = 0.0
@@ -255,11 +298,13 @@ def external_torque(xi1: float, xi2: float, pv: np.ndarray) -> float:
 
 @jit_inline
 def acceleration(xi1: float, xi2: float, q: float, eta: float, phi_a: float, gain: float,
-                 on_time: float, pv: np.ndarray, fric_dir: float = 0.0) -> float:
+                 on_time: float, pv: np.ndarray, fric_dir: float = 0.0,
+                 on_speed: float = math.inf) -> float:
     """Flow map of xi2: xi2' [rad/s^2] from (38)/(45) plus the enabled extensions.
 
     (38) divided by L:  (J/L) xi2' = r F_a sin(xi_c) q - (r + L)/L tau_f sign(xi2) + tau_ext.
-    ``gain`` multiplies the actuator force (spread x retention).  ``fric_dir`` (+1/-1) fixes
+    ``gain`` multiplies the actuator force (spread x retention), and the start push
+    (:func:`start_push`, with ``on_speed`` [rad/s] the speed at switch-on) likewise.  ``fric_dir`` (+1/-1) fixes
     the direction of Coulomb friction for a whole flow segment (the integrator ends a segment
     with a stop event when xi2 reaches 0); with 0 it follows sign(xi2).  At xi2 == 0 friction is
     static: it cancels any net torque up to its magnitude, so a stopped wheel stays stopped
@@ -267,9 +312,12 @@ def acceleration(xi1: float, xi2: float, q: float, eta: float, phi_a: float, gai
     """
     tau = 0.0
     xi_c = xi1 - eta * SECTOR
-    if q != 0.0 and pv[L.P_BAND_LO] <= abs(xi_c) <= pv[L.P_BAND_HI]:
-        tau = gain * pv[L.P_R] * force_law(xi_c, xi2, phi_a, pv) * math.sin(xi_c)
-        if pv[L.P_RISE_TIME] > 0.0:
+    if q != 0.0:
+        if pv[L.P_BAND_LO] <= abs(xi_c) <= pv[L.P_BAND_HI]:
+            tau = gain * pv[L.P_R] * force_law(xi_c, xi2, phi_a, pv) * math.sin(xi_c)
+        if pv[L.P_START_TORQUE] != 0.0:
+            tau += gain * start_push(xi_c, phi_a, on_speed, pv)
+        if tau != 0.0 and pv[L.P_RISE_TIME] > 0.0:
             tau *= 1.0 - math.exp(-max(on_time, 0.0) / pv[L.P_RISE_TIME])
     tau += external_torque(xi1, xi2, pv)
     tf = pv[L.P_FRICTION]

@@ -28,6 +28,9 @@ from hasel_wheel_sim.wheel import TICK, HybridWheel, SwitchMode
 COUNT = ENCODER_COUNT  # one encoder count [rad]
 HV_SUPPLY_V = 9000.0                    # HV converter output while HV is enabled [V]
 ACTUATOR_CURRENT_A = 3e-4               # supply current while an actuator charges [A]
+FAULT_REJECTED = 32                     # fault bit: a command was rejected (docs/protocol.md)
+FAULT_MAX_ON_TIME = 8                   # fault bit: a pad reached the maximum on-time
+MAX_ON_TIME = 2.0                       # the device's default maximum on-time [s] (rule 5)
 
 
 @dataclass(frozen=True)
@@ -133,6 +136,40 @@ class _Draws:
         return self.normal[k], u[0], u[1]
 
 
+class PlantEvents:
+    """The plant's events at a set time (effects ``pad_death`` and ``obstacle``).
+
+    From ``pad_death.time`` [s] on, pad ``pad_death.pad``'s force gain is multiplied by
+    ``pad_death.gain``.  During [``obstacle.time``, + ``obstacle.duration``) [s] the Coulomb
+    friction torque at the axle grows by ``obstacle.torque`` [N*m]: it brakes a rolling wheel
+    and holds a standing one up to that torque.  Each applies at the start of the first tick
+    at or after its time.  Tests: ``test_effects.py::test_a_pad_dies_at_its_time`` and
+    ``::test_an_obstacle_stops_the_wheel_for_its_duration``.
+    """
+
+    def __init__(self, fx: EffectsConfig, pv: np.ndarray) -> None:
+        pad = fx.get("pad_death", "pad")
+        if pad != int(pad):
+            raise ParameterError(f"plant.effects.pad_death.pad = {pad!r}: expected a whole pad "
+                                 f"index 0..15")
+        self.pad_death = (int(pad), fx.get("pad_death", "time"),
+                          fx.get("pad_death", "gain")) if fx.on("pad_death") else None
+        self.obstacle = (fx.get("obstacle", "time"), fx.get("obstacle", "duration"),
+                         fx.get("obstacle", "torque")) if fx.on("obstacle") else None
+        self._friction = float(pv[L.P_FRICTION])
+
+    def apply(self, t: float, pv: np.ndarray) -> None:
+        """Set ``pv`` for the tick starting at ``t`` [s]."""
+        if self.pad_death is not None and t >= self.pad_death[1] - 1e-9:
+            pad, _, gain = self.pad_death
+            pv[L.P_GAINS + pad] *= gain
+            self.pad_death = None
+        if self.obstacle is not None:
+            start, duration, torque = self.obstacle
+            on = start - 1e-9 <= t < start + duration - 1e-9
+            pv[L.P_FRICTION] = self._friction + (torque if on else 0.0)
+
+
 class Plant:
     """A simulated wheel behind a simulated Teensy (sampling, encoder, link delays)."""
 
@@ -152,7 +189,11 @@ class Plant:
         self._quantise = fx.on("encoder")
         self._p_glitch = fx.get("encoder_glitches", "probability")
         self._p_drop = fx.get("dropouts", "probability")
+        self._events = PlantEvents(fx, self.wheel.pv)
         self._commands: deque[tuple[float, Command]] = deque()
+        self._faults = 0
+        #: START commands the wheel refused (pad not in contact, or an actuator on) [count].
+        self.starts_refused = 0
         self._samples: deque[TelemetrySample | None] = deque()
         #: The encoder's raw reading (0..1023, noise and glitches included) at the last tick,
         #: or at the initial angle before the first; what a device reads (:mod:`.firmware`).
@@ -176,9 +217,12 @@ class Plant:
             if command is not None:
                 commands.append((now + self._cmd_delay, command))
             while commands and commands[0][0] <= now + 1e-12:
-                c = commands.popleft()[1]
-                self.wheel.command(c.n_a, c.phi_a, c.phi_d, c.sequence)
+                self._apply(commands.popleft()[1])
+        self._events.apply(self.wheel.s[L.S_T], self.wheel.pv)
         self.last_events = self.wheel.advance(dt)
+        if self.wheel.s[L.S_Q] and self.wheel.s[L.S_ON_TIME] >= MAX_ON_TIME - 1e-9:
+            self.wheel.cut_hv()                  # protocol rule 5, as the firmware does
+            self._faults |= FAULT_MAX_ON_TIME
         sample = self._sample()
         if self._tlm_delay == 0.0:
             return sample
@@ -187,6 +231,16 @@ class Plant:
         if len(self._samples) <= math.ceil(self._tlm_delay / dt - 1e-9):
             return None
         return self._samples.popleft()
+
+    def _apply(self, c: Command) -> None:
+        """A command reaches the wheel: latched as the firmware does (protocol rule 3), or a
+        START (``c.now``) switches the pad in contact on at once; a refused START sets the
+        rejected-command fault bit in the next sample, as the device's REJECT would."""
+        if not c.now:
+            self.wheel.command(c.n_a, c.phi_a, c.phi_d, c.sequence)
+        elif self.wheel.start_now(c.n_a, c.phi_a, c.phi_d, c.sequence):
+            self.starts_refused += 1
+            self._faults |= FAULT_REJECTED
 
     def _sample(self) -> TelemetrySample | None:
         """What the firmware measures at this tick (None if the sample gets lost)."""
@@ -207,7 +261,8 @@ class Plant:
         q = int(s[L.S_Q])
         eta_u = int(s[L.S_ETA])
         t = s[L.S_T]
+        faults, self._faults = self._faults, 0
         return TelemetrySample(
             float(t), int(round(t * 1e6)), self.sequence, int(raw), float(angle), q, eta_u % 16,
             eta_u, (1 << (eta_u % 16)) if q else 0, HV_SUPPLY_V,
-            ACTUATOR_CURRENT_A if q else 0.0, max(int(s[L.S_CMD_SEQ]), 0), 0)
+            ACTUATOR_CURRENT_A if q else 0.0, max(int(s[L.S_CMD_SEQ]), 0), faults)

@@ -16,7 +16,8 @@ from hasel_wheel_common import protocol as P
 
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.integrator import advance
-from hasel_wheel_sim.model import N_ACTUATORS, SECTOR, Extensions, param_vector
+from hasel_wheel_sim.model import (N_ACTUATORS, SECTOR, Extensions, angle_at_reading, angle_reading,
+                                  param_vector)
 from hasel_wheel_sim.params import WheelParams
 
 #: The firmware / paper control period [s].
@@ -77,6 +78,7 @@ def initial_state(xi1: float = 0.0, xi2: float = 0.0, mode: SwitchMode = "exact"
     s[L.S_ETA] = math.floor(xi1 / SECTOR)
     s[L.S_THETA_ON] = math.inf
     s[L.S_THETA_OFF] = math.inf
+    s[L.S_ON_SPEED] = math.inf
     s[L.S_MODE] = _MODES[mode]
     return s
 
@@ -142,6 +144,38 @@ class HybridWheel:
         s[L.S_PEND_PHI_D] = phi_d
         s[L.S_PEND_SEQ] = seq
 
+    def start_now(self, n_a: int, phi_a: float, phi_d: float, seq: int = 0) -> int:
+        """Switch pad ``n_a`` on now if its contact angle (as read) lies in [phi_a, phi_d)
+        [rad]; it switches off at phi_d like a latched command (protocol v1.1 START).
+
+        Returns 0 when it switched on, else the protocol's reject reason: R_ACTUATOR_ON while
+        an actuator is on, R_NOT_IN_CONTACT outside the window; nothing changes then.  The
+        pending command is forgotten.  Raises :class:`CommandError` on values a COMMAND would
+        refuse.  Test: ``test_wheel_start.py``.
+        """
+        validate_command(n_a, phi_a, phi_d)
+        s = self.s
+        if s[L.S_Q] != 0.0:
+            return P.R_ACTUATOR_ON
+        reading = angle_reading(s[L.S_XI1], self.pv)
+        k = math.floor((reading - phi_a) / SECTOR)            # last sector whose phi_a is passed
+        n = k - (k - n_a) % N_ACTUATORS
+        if reading >= n * SECTOR + phi_d:
+            return P.R_NOT_IN_CONTACT
+        s[L.S_PEND] = 0.0
+        s[L.S_ETA] = n
+        s[L.S_PHI_A] = reading - n * SECTOR
+        s[L.S_PHI_D] = phi_d
+        s[L.S_THETA_ON] = s[L.S_XI1]
+        s[L.S_THETA_OFF] = angle_at_reading(n * SECTOR + phi_d, self.pv)
+        s[L.S_CMD_SEQ] = seq
+        s[L.S_ARMED] = 1.0
+        s[L.S_Q] = 1.0
+        s[L.S_ON_TIME] = 0.0
+        s[L.S_ON_SPEED] = s[L.S_XI2]
+        s[L.S_N_ON] += 1.0
+        return 0
+
     def open_loop(self, phi_a: float, phi_d: float, rule: SequentialRule = "after_active",
                   priming: int = 0, priming_phi_a: float = math.radians(3.0)) -> None:
         """Run the built-in sequential schedule (see :func:`set_open_loop`)."""
@@ -179,6 +213,7 @@ class HybridWheel:
             s[L.S_ETA] = sector
             s[L.S_PHI_A] = phi_a
             s[L.S_ON_TIME] = 0.0
+            s[L.S_ON_SPEED] = s[L.S_XI2]
             s[L.S_CMD_SEQ] = seq
             s[L.S_N_ON] += 1.0
 

@@ -1,0 +1,90 @@
+"""When a wheel is started, restarted, or given up: the start and stall policies' rules.
+
+A wheel is *still* when its encoder moved less than ``still_speed`` x the window over the
+last encoder window (:data:`~hasel_wheel_mpc.core.START_SAMPLES` samples).  A still wheel
+with no pad on is started with a START (protocol v1.1): the pad in contact switches on at
+once and pushes (docs/model.md, "Start from rest").  A wheel that was rolling and has been
+slower than ``still_speed`` for ``stall_time`` [s] while the reference is above zero has
+*stalled*: the MPC gives way to the start policy again (a restart).  A run of restarts ends
+when the wheel reaches half its reference; after ``max_restarts`` restarts in a run that
+did not, the policy gives up: HV off, and diagnostics say at which pad.
+Tests: ``test_start_policy.py``, ``test_core.py``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+#: A restart run ends once the wheel reaches this fraction of its reference [1].
+RECOVERED = 0.5
+
+#: Verdicts of :meth:`StallMonitor.step`.
+RESTART, GIVE_UP = "restart", "give_up"
+
+
+@dataclass(frozen=True)
+class StartConfig:
+    """Start and stall policies (SI units).
+
+    ``still_speed`` [rad/s]: slower than this, the wheel counts as standing.
+    ``stall_time`` [s]: that long standing, with a reference above zero, is a stall.
+    ``max_restarts`` [count]: restarts in a row that do not bring the wheel to half its
+    reference before HV goes off.
+    """
+
+    still_speed: float = 0.1
+    stall_time: float = 1.0
+    max_restarts: int = 5
+
+    def __post_init__(self) -> None:
+        def number(v) -> bool:
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        if not (number(self.still_speed) and 0.0 < self.still_speed <= 1.0):
+            raise ValueError(f"start.still_speed = {self.still_speed!r}: expected a speed in "
+                             f"(0, 1] rad/s")
+        if not (number(self.stall_time) and 0.1 <= self.stall_time <= 60.0):
+            raise ValueError(f"start.stall_time = {self.stall_time!r}: expected a time in "
+                             f"[0.1, 60] s")
+        if not (number(self.max_restarts) and float(self.max_restarts).is_integer()
+                and 0 <= self.max_restarts <= 100):
+            raise ValueError(f"start.max_restarts = {self.max_restarts!r}: expected a whole "
+                             f"number of restarts in [0, 100]")
+
+
+class StallVerdict(NamedTuple):
+    """What :meth:`StallMonitor.step` found: RESTART or GIVE_UP, and the pad in contact."""
+
+    what: str
+    pad: int
+
+
+class StallMonitor:
+    """Counts the time a rolling wheel stands and the restarts in a row (module docstring)."""
+
+    def __init__(self, config: StartConfig | None = None) -> None:
+        self.config = config or StartConfig()
+        self.restarts = 0           # restarts in the current run [count]
+        self.total_restarts = 0     # restarts since the start [count]
+        self._still_since: float | None = None
+
+    def step(self, t: float, still: bool, speed: float, reference: float, started: bool,
+             pad: int) -> StallVerdict | None:
+        """One sample at ``t`` [s]: ``still`` from the encoder, ``speed`` [rad/s] the MPC's,
+        ``reference`` [rad/s], ``started`` whether the MPC drives (not the start policy),
+        ``pad`` the pad in contact (0..15).  Returns a verdict when one is due."""
+        if reference > 0.0 and speed >= RECOVERED * reference:
+            self.restarts = 0
+        if not still or reference <= 0.0 or not started:
+            self._still_since = None
+            return None
+        if self._still_since is None:
+            self._still_since = t
+        if t - self._still_since < self.config.stall_time:
+            return None
+        self._still_since = None
+        if self.restarts >= self.config.max_restarts:
+            return StallVerdict(GIVE_UP, pad)
+        self.restarts += 1
+        self.total_restarts += 1
+        return StallVerdict(RESTART, pad)
