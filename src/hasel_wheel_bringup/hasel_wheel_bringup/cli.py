@@ -103,6 +103,10 @@ def cmd_demo(args: argparse.Namespace) -> int:
     if args.wheels < 1:
         print(f"error: --wheels {args.wheels}: expected at least 1", file=sys.stderr)
         return 2
+    if not 0.0 <= args.w0 <= 10.0:
+        print(f"error: --w0 {args.w0}: expected a starting speed in [0, 10] rad/s",
+              file=sys.stderr)
+        return 2
     if args.same_wheel and args.wheels < 2:
         print(f"error: --same-wheel records several runs of one wheel: give --wheels 2 or "
               f"more (got --wheels {args.wheels})", file=sys.stderr)
@@ -116,6 +120,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
                                          "seed": str(plant_cfg.seed),
                                          "plant.yaml": Path(args.plant).read_text(),
                                          "hold_scale": repr(args.hold_scale),
+                                         "w0": repr(args.w0),
                                          "wheels": str(args.wheels),
                                          "same_wheel": str(args.same_wheel).lower(),
                                          "controller_overrides": repr(dict(args.set or []))})
@@ -123,7 +128,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         results = run_variants(plant_cfg, args.hold_scale, variants, rec, args.wheels,
-                               dict(args.set or []), args.same_wheel)
+                               dict(args.set or []), args.same_wheel, args.w0)
     finally:
         rec.close()
     wall = time.perf_counter() - t0
@@ -309,6 +314,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --wheels N: N runs of one wheel (its actuator gains drawn once, "
                         "from the plant seed, as `trials` records one wheel); each run still "
                         "draws its noise from seed + i")
+    c.add_argument("--w0", type=float, default=0.0,
+                   help="the wheel's speed at the start [rad/s] (default 0: from rest, started "
+                        "by the start policy)")
     c.add_argument("--no-compare", dest="compare", action="store_false",
                    help="skip the comparison runs (no estimator, paper estimator, finite difference)")
     c.add_argument("--set", action="append", type=bag_cli.override_arg,

@@ -18,7 +18,7 @@ from hasel_wheel_sim.plant import run_configs
 
 from hasel_wheel_sim import paper
 from hasel_wheel_mpc.closed_loop import (FIG11_DURATION, FIG11_PROFILE, LoopLog, WheelLoop, controller_config,
-                          run_controller, run_wheels, segment_metrics)
+                          run_controller, run_wheels, segment_metrics, start_time)
 
 #: (label, keyword arguments of run_closed_loop) of the comparison runs.
 VARIANTS = (
@@ -41,8 +41,10 @@ def scaled_profile(scale: float):
 
 
 def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=None,
-                 wheels: int = 1, overrides: dict | None = None, same_wheel: bool = False):
-    """Run each variant on the scaled profile; the first is recorded (if ``recorder``).
+                 wheels: int = 1, overrides: dict | None = None, same_wheel: bool = False,
+                 w0: float = 0.0):
+    """Run each variant on the scaled profile, the wheel starting at ``w0`` [rad/s] (0: from
+    rest); the first is recorded (if ``recorder``).
 
     With ``wheels`` > 1 the first variant runs that many wheels in lockstep, wheel i on the
     plant with seed ``plant_config.seed + i``, each recorded under ``/wheel<i>``; the
@@ -61,14 +63,14 @@ def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=N
         if overrides:
             cfg = cfg.with_overrides(overrides)
         if i == 0:
-            loops = [WheelLoop(cfg, profile, pc, recorder=recorder, ns=f"/wheel{k}")
+            loops = [WheelLoop(cfg, profile, pc, w0=w0, recorder=recorder, ns=f"/wheel{k}")
                      for k, pc in enumerate(plants)]
             logs = run_wheels(loops, duration)
             log = logs[0]
             extra = [VariantResult(f"{label}, /wheel{k}", lg, segment_metrics(lg, profile, duration))
                      for k, lg in enumerate(logs[1:], start=1)]
         else:
-            log = run_controller(cfg, profile, duration, plants[0])
+            log = run_controller(cfg, profile, duration, plants[0], w0=w0)
         out.append(VariantResult(label, log, segment_metrics(log, profile, duration)))
     return out + extra
 
@@ -86,6 +88,10 @@ def metrics_table(results: list[VariantResult], effects: list[str] | None = None
         "reference", "is first reached.", ""]
     for res in results:
         lines.append(f"{res.label}:")
+        first = res.metrics[0].reference
+        if res.log.true_speed[0] < first:
+            lines.append(f"  start: {first:.1f} rad/s first reached after "
+                         f"{_f(start_time(res.log, first), '.2f')} s")
         lines.append("  ref [rad/s] | steady err [%] | NRMSE | rise/fall [s] | paper: err [%], NRMSE"
                      " (with / without estimator)")
         prev = None

@@ -174,6 +174,14 @@ class WheelLoop:
             rec.command(ns, r.command, s.t)
 
 
+def start_time(log: LoopLog, reference: float) -> float:
+    """Time [s] from the start of the run until the true speed first reaches ``reference``
+    [rad/s]; nan if it never does (``test_start_stall.py``)."""
+    v = np.asarray(log.true_speed)
+    hit = np.flatnonzero(v >= reference)
+    return float(log.t[hit[0]]) if len(hit) else math.nan
+
+
 def segment_metrics(log: LoopLog, profile=FIG11_PROFILE, duration: float = FIG11_DURATION,
                     window: float = 10.0) -> list[SegmentMetrics]:
     """Per reference segment of ``profile``, on the true speed (see

@@ -35,7 +35,7 @@ from hasel_wheel_mpc.disturbance import IntegralEstimator
 from hasel_wheel_mpc.mpc import Decision, Mpc, next_pad
 from hasel_wheel_mpc.observer import Estimate, ObserverConfig
 from hasel_wheel_mpc.pad_health import PadHealth, PadVerdict
-from hasel_wheel_mpc.start_policy import GIVE_UP, RESTART, StallMonitor, StallVerdict
+from hasel_wheel_mpc.start_policy import StallMonitor, StallVerdict
 
 #: (phi_a, phi_d) [rad] of the start command (sequence 0), and of any latched command whose
 #: sequence number the core did not send: the observer's angles for an unknown command.
@@ -55,6 +55,8 @@ START_LEAD = 0.1
 START_SAMPLES = 30
 #: The least time those samples must span before a start command is aimed [s].
 START_WINDOW = 0.02
+#: A pad's cycle (its switch-on to the next) longer than this says nothing of its push [s].
+PAD_CYCLE_MAX = 1.0
 #: Command angles remembered by sequence number (the latched one is always recent) [count].
 ANGLES_KEPT = 64
 
@@ -237,7 +239,7 @@ class ControlCore:
             dead = tuple(sorted(self.pads.dead))
             gains = ", ".join(f"pad {p} gain {self.pads.dead[p].gain:.2f}" for p in dead)
             return CoreStatus(1, "pad_dead", dead, f"dead pads skipped: {gains}")
-        if self.stall.restarts:
+        if self.stall.total_restarts and self.stall.restarts:
             return CoreStatus(1, "restarting", (), f"restart {self.stall.restarts} of "
                               f"{self.config.start.max_restarts}")
         if not self.started:
@@ -259,15 +261,15 @@ class ControlCore:
         self._track_reference(reference)
         if switched_off:
             self._end_cycle(speed, reference)
-            self._pad_cycle(e, speed)
         if switched_on:
+            self._pad_cycle(e, speed)
             self._on = (e.eta_unwrapped % N_ACTUATORS, e.t, speed,
                         self.angles_of(self._latched)[0] < 0.0)
         d = self.d
-        verdict = self._stall(e, speed, reference)
-        if verdict is not None and verdict.what == GIVE_UP:
-            self.gave_up = verdict
-            return CoreStep(None, STALLED, None, d_before, d, speed, hv_off=True)
+        enc = self._encoder_speed()
+        still = enc is not None and abs(enc) < self.config.start.still_speed
+        if self.stall.step(e.t, still, speed, reference, self.started):
+            self.started = False                  # stalled: the start policy takes over
         start_pad = switched_on and self._start_now   # a START's pad: the start policy goes on
         if start_pad:
             self._start_now = False
@@ -277,6 +279,8 @@ class ControlCore:
             e.deact_counter, speed, self.redecide_min_time)
         if why is None and not self.started:
             cmd = self._start(e)
+            if self.gave_up is not None:
+                return CoreStep(None, STALLED, None, d_before, d, speed, hv_off=True)
             return CoreStep(cmd, START if cmd else None, None, d_before, d, speed)
         if why is None:
             return CoreStep(None, None, None, d_before, d, speed)
@@ -348,7 +352,12 @@ class ControlCore:
                    and -max(speed, 0.0) * START_LEAD < e.act_counter <= 2.0 * SECTOR):
             return None
         angle = self._encoder[-1][1]
-        return self.sent_start(self.start_command(angle, speed), angle)
+        cmd = self.start_command(angle, speed)
+        if cmd.now:
+            self.gave_up = self.stall.start(cmd.n_a)
+            if self.gave_up is not None:
+                return None
+        return self.sent_start(cmd, angle)
 
     def sent_start(self, cmd: Command, angle: float) -> Command:
         """Record that the start command ``cmd``, aimed at the encoder ``angle`` [rad], goes
@@ -361,25 +370,16 @@ class ControlCore:
         self.starts += 1
         return cmd
 
-    def _stall(self, e: Estimate, speed: float, reference: float) -> StallVerdict | None:
-        """The stall monitor's verdict at this estimate; a restart hands the wheel back to
-        the start policy."""
-        enc = self._encoder_speed()
-        still = enc is not None and abs(enc) < self.config.start.still_speed
-        angle = self._encoder[-1][1] if self._encoder else e.xi1
-        verdict = self.stall.step(e.t, still, speed, reference, self.started, contact_pad(angle))
-        if verdict is not None and verdict.what == RESTART:
-            self.started = False
-        return verdict
-
     def _pad_cycle(self, e: Estimate, speed: float) -> None:
-        """A pad switched off: its cycle's push goes to :attr:`pads`; a pad found dead is
-        planned with its measured gain and skipped from now on."""
+        """A pad switched on: the cycle of the pad before it (from its switch-on to this one,
+        so that the speed estimate has caught up with what the encoder saw) goes to
+        :attr:`pads`; a pad found dead is planned with its measured gain and skipped from now
+        on.  Braking cycles and cycles longer than ``PAD_CYCLE_MAX`` do not count."""
         if self._on is None:
             return
         pad, t_on, v_on, braking = self._on
         self._on = None
-        if braking or e.t <= t_on:
+        if braking or not 0.0 < e.t - t_on <= PAD_CYCLE_MAX:
             return
         coast = acceleration(e.xi1, max(speed, 1e-3), 0.0, 0.0, 0.0, 1.0, 0.0, self.mpc.pv, 1.0)
         verdict = self.pads.cycle(pad, e.t, e.t - t_on, speed - v_on, coast)

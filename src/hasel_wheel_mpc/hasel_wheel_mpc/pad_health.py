@@ -1,15 +1,16 @@
 """Which pads still push: each pad's push measured from its own switch-on cycles.
 
 A HASEL pad whose dielectric has broken down still takes HV but no longer pushes.  Over one
-driving cycle of pad i (switch-on to switch-off, duration dt [s]) the wheel's speed changes by
-dv [rad/s]; a coasting wheel would have changed by a0 dt, a0 [rad/s^2] the model's
-acceleration with no pad on (friction, drag).  The pad's push is
+driving cycle of pad i (its switch-on to the next pad's, duration dt [s]; no other pad pushes
+in it) the wheel's speed changes by dv [rad/s]; a coasting wheel would have changed by a0 dt,
+a0 [rad/s^2] the model's acceleration with no pad on (friction, drag).  The pad's push is
 
     p_i = dv - a0 dt   [rad/s],
 
 smoothed per pad over its cycles (exponential, weight :data:`SMOOTHING`).  Its gain is p_i
 over the median push of the pads measured, and a pad is dead when its last
-:data:`DEAD_CYCLES` cycles each gave less than :data:`DEAD_GAIN` of that median.  Braking
+:data:`DEAD_CYCLES` cycles each gave less than :data:`DEAD_GAIN` of that median; its
+measured gain is then their mean over the median.  Braking
 cycles (phi_a < 0) and cycles while the pads push too little to tell (median below
 :data:`MIN_PUSH`) are not counted.  Tests: ``test_pad_health.py``.
 """
@@ -71,9 +72,9 @@ class PadHealth:
         if not m > MIN_PUSH:
             return None
         recent = self._recent[pad]
-        recent.append(push < DEAD_GAIN * m)
-        if pad in self.dead or len(recent) < DEAD_CYCLES or not all(recent):
+        recent.append(push)
+        if pad in self.dead or len(recent) < DEAD_CYCLES or max(recent) >= DEAD_GAIN * m:
             return None
-        verdict = PadVerdict(pad, float(max(self.push[pad] / m, 0.0)), t)
+        verdict = PadVerdict(pad, float(max(np.mean(recent) / m, 0.0)), t)
         self.dead[pad] = verdict
         return verdict

@@ -5,9 +5,9 @@ last encoder window (:data:`~hasel_wheel_mpc.core.START_SAMPLES` samples).  A st
 with no pad on is started with a START (protocol v1.1): the pad in contact switches on at
 once and pushes (docs/model.md, "Start from rest").  A wheel that was rolling and has been
 slower than ``still_speed`` for ``stall_time`` [s] while the reference is above zero has
-*stalled*: the MPC gives way to the start policy again (a restart).  A run of restarts ends
-when the wheel reaches half its reference; after ``max_restarts`` restarts in a run that
-did not, the policy gives up: HV off, and diagnostics say at which pad.
+*stalled*: the MPC gives way to the start policy again.  Every START counts as a restart
+until the wheel reaches half its reference; the START after ``max_restarts`` of them is
+not sent: the policy gives up, HV goes off, and diagnostics say at which pad.
 Tests: ``test_start_policy.py``, ``test_core.py``.
 """
 from __future__ import annotations
@@ -19,8 +19,8 @@ from typing import NamedTuple
 #: A restart run ends once the wheel reaches this fraction of its reference [1].
 RECOVERED = 0.5
 
-#: Verdicts of :meth:`StallMonitor.step`.
-RESTART, GIVE_UP = "restart", "give_up"
+#: The verdict of :meth:`StallMonitor.start` when it gives up.
+GIVE_UP = "give_up"
 
 
 @dataclass(frozen=True)
@@ -29,7 +29,7 @@ class StartConfig:
 
     ``still_speed`` [rad/s]: slower than this, the wheel counts as standing.
     ``stall_time`` [s]: that long standing, with a reference above zero, is a stall.
-    ``max_restarts`` [count]: restarts in a row that do not bring the wheel to half its
+    ``max_restarts`` [count]: STARTs in a row that do not bring the wheel to half its
     reference before HV goes off.
     """
 
@@ -53,38 +53,43 @@ class StartConfig:
 
 
 class StallVerdict(NamedTuple):
-    """What :meth:`StallMonitor.step` found: RESTART or GIVE_UP, and the pad in contact."""
+    """What :meth:`StallMonitor.start` found: GIVE_UP, and the pad in contact (0..15)."""
 
     what: str
     pad: int
 
 
 class StallMonitor:
-    """Counts the time a rolling wheel stands and the restarts in a row (module docstring)."""
+    """Finds stalls and counts the STARTs in a row (module docstring)."""
 
     def __init__(self, config: StartConfig | None = None) -> None:
         self.config = config or StartConfig()
-        self.restarts = 0           # restarts in the current run [count]
-        self.total_restarts = 0     # restarts since the start [count]
+        self.restarts = 0           # STARTs since the wheel last reached half its reference
+        self.total_restarts = 0     # stalls found since the start [count]
         self._still_since: float | None = None
 
-    def step(self, t: float, still: bool, speed: float, reference: float, started: bool,
-             pad: int) -> StallVerdict | None:
+    def step(self, t: float, still: bool, speed: float, reference: float,
+             started: bool) -> bool:
         """One sample at ``t`` [s]: ``still`` from the encoder, ``speed`` [rad/s] the MPC's,
-        ``reference`` [rad/s], ``started`` whether the MPC drives (not the start policy),
-        ``pad`` the pad in contact (0..15).  Returns a verdict when one is due."""
+        ``reference`` [rad/s], ``started`` whether the MPC drives (not the start policy).
+        True when the wheel has stalled now: the start policy takes it back."""
         if reference > 0.0 and speed >= RECOVERED * reference:
             self.restarts = 0
         if not still or reference <= 0.0 or not started:
             self._still_since = None
-            return None
+            return False
         if self._still_since is None:
             self._still_since = t
         if t - self._still_since < self.config.stall_time:
-            return None
+            return False
         self._still_since = None
+        self.total_restarts += 1
+        return True
+
+    def start(self, pad: int) -> StallVerdict | None:
+        """A START of ``pad`` (0..15) is due: None to send it, or GIVE_UP when
+        ``max_restarts`` STARTs in a row have not brought the wheel to half its reference."""
         if self.restarts >= self.config.max_restarts:
             return StallVerdict(GIVE_UP, pad)
         self.restarts += 1
-        self.total_restarts += 1
-        return StallVerdict(RESTART, pad)
+        return None

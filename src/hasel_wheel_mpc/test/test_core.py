@@ -172,3 +172,15 @@ def test_a_node_that_hears_the_estimate_before_its_telemetry_still_starts_the_wh
             first_on = s.t
     assert starts and starts == sorted(starts)
     assert first_on is not None and first_on < 1.0
+
+
+def test_a_standing_wheel_is_started_with_a_start_of_the_pad_in_contact():
+    from hasel_wheel_mpc.core import START_NOW_WINDOW, ControlCore
+    from hasel_wheel_sim.model import SECTOR
+    core = ControlCore()
+    cmd = core.start_command(5 * SECTOR + math.radians(10), 0.0)
+    assert (cmd.n_a, cmd.phi_a, cmd.phi_d, cmd.now) == (5, *START_NOW_WINDOW, True)
+    rolling = core.start_command(5 * SECTOR + math.radians(10), 1.0)
+    assert not rolling.now and rolling.n_a == 6
+    core.sent_start(cmd, 5 * SECTOR + math.radians(10))
+    assert core.angles_of(0) == pytest.approx((math.radians(10), SECTOR))  # where it switches on

@@ -362,3 +362,15 @@ def test_no_garbage_collection_runs_inside_a_decision():
         gc.callbacks.remove(watch)
     assert len(inside) == 6 and collected == []
     assert gc.isenabled()
+
+
+def test_a_skipped_pad_is_not_driven():
+    mpc = Mpc()
+    xi1 = 20 * SECTOR + D(3)                               # pad 4 just on
+    mpc.skip = {5}
+    dec = mpc.decide(xi1, 2.0, 20, D(3), D(22), reference=2.0)
+    assert not dec.braking and dec.command.n_a == 6
+    mpc.skip = {5, 6}
+    assert mpc.target_pad(20) == 23
+    mpc.skip = set(range(16))
+    assert mpc.target_pad(20) == 36                        # none left: a whole turn on

@@ -208,3 +208,24 @@ def test_the_observer_and_the_mpc_work_on_readings_and_leave_the_eccentricity_ou
     for pv in (Observer(extensions=ext).pv, Mpc(extensions=ext).pv):
         assert pv[L.P_READ_COS] == 0.0 and pv[L.P_READ_SIN] == 0.0
         assert pv[L.P_VISCOUS] == 1e-4                     # the rest of the model stays
+
+
+def test_a_slow_wheel_teaches_the_disturbance_nothing():
+    # a wheel coasting down from 0.45 rad/s past an off-centre mass: once the observer is sure
+    # it is slower than learn_speed, a_d stays where it was; learning at every speed moves it
+    effects = dict(ENCODER, com_offset={"enabled": True, "torque": {"value": 0.004, "unit": "N*m"},
+                                        "phase": {"value": 0.5, "unit": "rad"}})
+
+    def coefficients(learn_speed):
+        p = Plant(config=PlantConfig(seed=1, effects=effects_from_mapping(effects)), xi2=0.45)
+        obs = Observer(config=ObserverConfig(learn_speed=learn_speed))
+        sure = []
+        for _ in range(360):                     # to rest and beyond
+            e = obs.step(p.step())
+            if abs(e.xi2) + 3.0 * e.xi2_std < 0.5:
+                sure.append(e.accel_coefficients)
+        return sure
+
+    held, learnt = coefficients(0.5), coefficients(1e-9)
+    assert len(held) > 300 and len(set(held[3:])) == 1   # (the gate reads P before the update)
+    assert len({c for c in learnt}) > 300

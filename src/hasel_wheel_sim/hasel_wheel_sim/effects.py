@@ -83,8 +83,8 @@ EFFECT_FIELDS: dict[str, dict[str, FieldSpec]] = {
     "obstacle": {
         "time": FieldSpec("s", 0.0, 1e6, low_closed=True, high_closed=True,
                           doc="simulated time at which the wheel meets it"),
-        "duration": FieldSpec("s", 0.0, math.inf, high_closed=False,
-                              doc="how long it holds the wheel back (inf: for good)"),
+        "duration": FieldSpec("s", 0.0, 1e6, high_closed=True,
+                              doc="how long it holds the wheel back (1e6: for good)"),
         "torque": FieldSpec("N*m", 0.0, 1.0, high_closed=True,
                             doc="Coulomb friction torque it adds at the axle"),
     },

@@ -283,3 +283,61 @@ def test_realistic_plant_is_bit_identical_for_a_seed_and_differs_across_seeds():
         return [(s.angle, s.sequence) if s else None for s in (p.step() for _ in range(3000))]
     assert run(7) == run(7)
     assert run(7) != run(8)
+
+
+def event_plant(w0=2.0, **events) -> Plant:
+    """The exact plant (no noise) with only the given event effects, rolling at ``w0``."""
+    return Plant(config=PlantConfig(effects=effects_from_mapping(events)), xi2=w0)
+
+
+def test_a_pad_dies_at_its_time():
+    p = event_plant(pad_death={"enabled": True, "pad": {"value": 5, "unit": "1"},
+                               "time": {"value": 0.5, "unit": "s"},
+                               "gain": {"value": 0.1, "unit": "1"}})
+    while p.t < 0.5 - 1e-9:
+        p.step()
+        assert p.wheel.pv[L.P_GAINS + 5] == 1.0
+    p.step()
+    assert p.wheel.pv[L.P_GAINS + 5] == pytest.approx(0.1)
+    assert np.all(np.delete(p.wheel.pv[L.P_GAINS:L.P_GAINS + 16], 5) == 1.0)
+
+
+def test_an_obstacle_stops_the_wheel_for_its_duration(params):
+    # 0.2 N*m more friction than T_f: the wheel stops within w0 J / (T_f + 0.2) and stays
+    # (it holds the wheel up to that torque), then the extra friction is gone
+    torque, start, duration = 0.2, 0.5, 1.0
+    p = event_plant(obstacle={"enabled": True, "time": {"value": start, "unit": "s"},
+                              "duration": {"value": duration, "unit": "s"},
+                              "torque": {"value": torque, "unit": "N*m"}})
+    stop = start + 2.0 * params.inertia / (params.friction_torque + torque)
+    while p.t < start + duration - 1e-9:
+        p.step()
+        if p.t > stop + TICK:
+            assert p.wheel.s[L.S_XI2] == 0.0
+    p.step()
+    assert p.wheel.pv[L.P_FRICTION] == pytest.approx(params.friction_torque, rel=1e-15)
+
+
+def test_a_pad_index_that_is_not_whole_is_refused():
+    with pytest.raises(ParameterError, match="pad_death.pad = 2.5"):
+        event_plant(pad_death={"enabled": True, "pad": {"value": 2.5, "unit": "1"},
+                               "time": {"value": 1.0, "unit": "s"}, "gain": {"value": 0.0, "unit": "1"}})
+
+
+def test_a_pad_on_for_the_maximum_on_time_is_switched_off():
+    # protocol rule 5 on the plant: a standing wheel's pad goes off after 2 s, fault bit 8
+    p = Plant(xi1=5 * math.pi / 8 + D(10))
+    assert p.wheel.start_now(5, 0.0, math.pi / 8) == 0
+    faults = 0
+    for _ in range(round(2.0 / TICK) + 1):
+        s = p.step()
+        faults |= s.fault_flags
+    assert p.wheel.s[L.S_Q] == 0.0 and faults & 8
+    assert p.wheel.s[L.S_XI1] == 5 * math.pi / 8 + D(10)          # the paper's wheel: no push
+
+
+def test_a_refused_start_sets_the_rejected_command_fault_bit():
+    p = Plant(xi1=5 * math.pi / 8 + D(10))
+    s = p.step(Command(6, 0.0, math.pi / 8, 3, now=True))        # pad 5 is in contact
+    assert s.fault_flags & 32 and p.starts_refused == 1 and p.wheel.s[L.S_Q] == 0.0
+    assert p.step().fault_flags == 0
