@@ -83,11 +83,13 @@ REFERENCE = Topic("reference_speed", "std_msgs/msg/Float64", LATCHED, "user | ru
                   "speed reference xi2_r [rad/s]")
 TRUE_STATE = Topic("sim/true_state", "hasel_wheel_msgs/msg/HybridStateEstimate", STREAM, "sim",
                    "the simulator's true hybrid state (ground truth, sim only)")
+HV_REQUEST = Topic("hv_request", "std_msgs/msg/Bool", LATCHED, "mpc",
+                   "false: switch HV off now (the control core gave up a stalled wheel)")
 DIAGNOSTICS = Topic("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", RELIABLE, "every node",
                     "health: link, rates, HV state, deadline misses")
 
 ALL = (TELEMETRY, JOINT_STATES, COMMAND, STATE_ESTIMATE, MPC_STATUS, REFERENCE, TRUE_STATE,
-       DIAGNOSTICS)
+       HV_REQUEST, DIAGNOSTICS)
 
 
 def qualified(topic: Topic, namespace: str = "") -> str:

@@ -144,7 +144,7 @@ class ControllerConfig:
 
 #: ROS parameters of observer_node / mpc_node that are fields of ObserverConfig / MpcConfig.
 OBSERVER_PARAMS = ("accel_noise", "encoder_noise", "gate_sigma", "disturbance_rate",
-                   "pivot_rate")
+                   "pivot_rate", "learn_speed")
 MPC_PARAMS = ("brake_threshold", "brake_phi_a", "brake_phi_d", "terminal_weight",
               "horizon_pads", "time_weighted", "deadline_margin", "max_horizon", "phi_a_min", "phi_a_max")
 #: mpc_node's ROS parameters that are fields of StartConfig.

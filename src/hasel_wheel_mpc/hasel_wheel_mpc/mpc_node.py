@@ -2,7 +2,9 @@
 
 Subscribes to ``state_estimate`` (the observer's six states, one per telemetry sample),
 ``telemetry`` (the encoder angle and the latched command) and ``reference_speed``; publishes
-``command``, ``mpc_status`` (one per decision) and ``/diagnostics``.  Every estimate goes to
+``command``, ``mpc_status`` (one per decision), ``hv_request`` (false once the core gives up a
+stalled wheel) and ``/diagnostics`` (the core's status: starting, restarting, dead pads,
+"stalled at pad N").  Every estimate goes to
 :meth:`hasel_wheel_mpc.core.ControlCore.step`, which the embedded runner calls the same way,
 so the node decides as the embedded runner does (``test_nodes.py``, ``test_core.py``).
 
@@ -25,7 +27,7 @@ from hasel_wheel_msgs.msg import ActuationCommand, HybridStateEstimate, MpcStatu
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from std_msgs.msg import Float64
+from std_msgs.msg import Bool, Float64
 
 from hasel_wheel_common import samples, topics
 from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_param, int_param,
@@ -34,6 +36,7 @@ from hasel_wheel_common.nodes.ros_common import (create_publishers, fill, float_
 from hasel_wheel_sim.model import SECTOR
 
 from hasel_wheel_mpc.config import ESTIMATOR_MODES, MPC_PARAMS, ControllerConfig
+from hasel_wheel_mpc.start_policy import StartConfig
 from hasel_wheel_mpc.core import IDLE_SAMPLES, REDECIDE_MIN_TIME, ControlCore
 from hasel_wheel_mpc.disturbance import ESTIMATOR_GATE, TRACKING_GAIN
 from hasel_wheel_mpc.mpc import MpcConfig, gc_paused
@@ -117,6 +120,20 @@ class MpcNode(Node):
             "estimator_gate", ESTIMATOR_GATE,
             float_param("estimator runs only within this band around the reference [rad/s]",
                         0.01, 10.0)).value
+        start = StartConfig()
+        still = self.declare_parameter(
+            "still_speed", start.still_speed,
+            float_param("start/stall policy: a wheel slower than this stands [rad/s]", 0.001,
+                        1.0, True)).value
+        stall = self.declare_parameter(
+            "stall_time", start.stall_time,
+            float_param("start/stall policy: standing this long with a reference above 0 is a "
+                        "stall, and the wheel is restarted [s]", 0.1, 60.0, True)).value
+        restarts = self.declare_parameter(
+            "max_restarts", start.max_restarts,
+            int_param("start/stall policy: STARTs in a row that do not bring the wheel to half "
+                      "its reference before HV goes off (hv_request false) [count]", 0, 100,
+                      True)).value
         period = self.declare_parameter(
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
                                                    True)).value
@@ -124,7 +141,8 @@ class MpcNode(Node):
                                               for k in CONFIG_PARAMS})
         self.core = ControlCore(ControllerConfig(params, ext, mpc=mpc_cfg,
                                                  estimator_gain=gain or None,
-                                                 estimator_mode=mode, estimator_gate=gate))
+                                                 estimator_mode=mode, estimator_gate=gate,
+                                                 start=StartConfig(still, stall, restarts)))
         self.core.idle_samples = self.get_parameter("idle_samples").value
         self.core.redecide_min_time = self.get_parameter("redecide_min_time").value
         self.mpc = self.core.mpc                        # loads the compiled predictor
@@ -142,8 +160,9 @@ class MpcNode(Node):
         self.last_age = math.nan
 
         pubs = create_publishers(self, (topics.COMMAND, topics.MPC_STATUS, topics.DIAGNOSTICS,
-                                        topics.REFERENCE))
-        self.pub_cmd, self.pub_status, self.pub_diag, self.pub_ref = pubs.values()
+                                        topics.REFERENCE, topics.HV_REQUEST))
+        self.pub_cmd, self.pub_status, self.pub_diag, self.pub_ref, self.pub_hv = pubs.values()
+        self.reported = ("", ())                     # the core status last logged
         self.published_ref = math.nan
         self.ref_subscribers = 0
         self.create_subscription(HybridStateEstimate, topics.STATE_ESTIMATE.name,
@@ -239,13 +258,17 @@ class MpcNode(Node):
         self.window_estimates += 1
         ref = self.reference
         r = self.core.step(estimate_from_msg(msg), ref)
+        if r.hv_off:
+            self.pub_hv.publish(Bool(data=False))
+            self.get_logger().error(f"{self.core.status().text}; hv_request false sent")
+            self._on_diagnostics()
         if r.command is None:
             return
         t = self.get_clock().now().nanoseconds * 1e-9
         self.pub_cmd.publish(fill(ActuationCommand(), samples.command_msg(r.command, t)))
         if r.decision is None:
-            if self.core.starts == 1:
-                self.get_logger().info(f"start: actuator {r.command.n_a} at the start angles")
+            kind = "START of the pad in contact" if r.command.now else "at the start angles"
+            self.get_logger().info(f"start {self.core.starts}: actuator {r.command.n_a} {kind}")
             return
         dec = r.decision
         overhead = time.perf_counter() - t_in - dec.compute_time
@@ -288,9 +311,19 @@ class MpcNode(Node):
             "references_rejected": str(self.refs_rejected),
             "start_commands": str(self.core.starts), "started": str(self.core.started),
             "estimator_d_rad_s": f"{self.core.d:.4f}",
-            "estimator_updates": str(self.core.estimator.updates if self.core.estimator else 0)}
+            "estimator_updates": str(self.core.estimator.updates if self.core.estimator else 0),
+            "restarts": str(self.core.stall.restarts),
+            "stalls": str(self.core.stall.total_restarts),
+            "dead_pads": " ".join(str(p) for p in sorted(self.core.pads.dead)) or "-",
+            "pad_gains": " ".join(_f(g) for g in self.core.pads.gains())}
         self.slack_min = math.inf
-        if rate < 1.0:
+        status = self.core.status()
+        if status.level > 0 and (status.code, status.pads) != self.reported:
+            self.get_logger().warn(status.text)
+        self.reported = (status.code, status.pads)
+        if status.level > 0:
+            level, text = status.level, status.text
+        elif rate < 1.0:
             level, text = DiagnosticStatus.STALE[0], "no state estimate"
         elif self.mpc.deadline_misses or self.late:
             level, text = DiagnosticStatus.WARN[0], "deadline misses (fallback input sent)"
@@ -298,6 +331,10 @@ class MpcNode(Node):
             level, text = DiagnosticStatus.OK[0], "deciding"
         publish_status(self, self.pub_diag, "mpc", "hasel_wheel_mpc", level,
                        text, values)
+
+
+def _f(x: float) -> str:
+    return "-" if math.isnan(x) else f"{x:.2f}"
 
 
 def main(args=None):

@@ -57,6 +57,10 @@ class ObserverNode(Node):
             "pivot_rate", defaults.pivot_rate,
             float_param("random-walk intensity of the once-per-pivot-lap disturbance (e, f) "
                         "[rad/s^2 per sqrt(s)]; 0 = none", 0.0, 10.0, True)).value
+        learn_speed = self.declare_parameter(
+            "learn_speed", defaults.learn_speed,
+            float_param("the disturbance is not learnt while the wheel is surely slower than "
+                        "this (starting, stalled) [rad/s]", 0.0, 5.0, True)).value
         self.declare_parameter("frame_id", "wheel", text_param("frame_id of estimate headers"))
         period = self.declare_parameter(
             "diagnostics_period", 1.0, float_param("period of /diagnostics [s]", 0.1, 60.0,
@@ -64,7 +68,7 @@ class ObserverNode(Node):
         self.frame_id = self.get_parameter("frame_id").value
         self.obs = Observer(params, ext, config=ObserverConfig(
             accel_noise=accel_noise, encoder_noise=encoder_noise, gate_sigma=gate_sigma,
-            disturbance_rate=disturbance_rate, pivot_rate=pivot_rate))
+            disturbance_rate=disturbance_rate, pivot_rate=pivot_rate, learn_speed=learn_speed))
         _warm_up(params)
         self.obs.command_sent(0, *START_ANGLES)
         # diagnostics
@@ -88,7 +92,8 @@ class ObserverNode(Node):
 
     # -- inputs -------------------------------------------------------------------------------
     def _on_command(self, msg: ActuationCommand) -> None:
-        self.obs.command_sent(int(msg.sequence), float(msg.phi_a), float(msg.phi_d))
+        self.obs.command_sent(int(msg.sequence), float(msg.phi_a), float(msg.phi_d),
+                              bool(msg.now))
 
     def _on_telemetry(self, msg: WheelTelemetry) -> None:
         s = samples.telemetry_from_msg(msg)

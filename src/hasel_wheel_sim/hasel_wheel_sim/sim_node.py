@@ -53,7 +53,8 @@ class SimNode(Node):
                        "plant's dynamics, in place of wheel_params_file and plant_file's dynamic "
                        "effects; '' = not used")).value
         w0 = self.declare_parameter(
-            "initial_speed", 1.0, float_param("wheel speed at start [rad/s]", 0.0, 20.0, True)).value
+            "initial_speed", 0.0, float_param("wheel speed at start [rad/s]; 0 = from rest",
+                                              0.0, 20.0, True)).value
         scale = self.declare_parameter(
             "time_scale", 1.0, float_param("simulated seconds per wall second [1]", 0.01, 100.0)).value
         seed_offset = self.declare_parameter(
@@ -112,10 +113,10 @@ class SimNode(Node):
     def _start(self) -> bool:
         """True once the simulation runs.  It starts when the loop is connected (a node that
         publishes commands, matched to our subscription, also subscribes to our telemetry; a
-        recorder's subscription alone does not count) or after start_timeout.  A wheel that
-        starts at 1 rad/s coasts to a stop within about 2 s and no pad can start it again, so
-        it must not run while DDS discovery, or a slow first step, keeps the controller's first
-        command from it.  The pacing and the header clock are anchored here, at t = 0."""
+        recorder's subscription alone does not count) or after start_timeout, so the run, and
+        its recording, begin with the controller listening (a coasting wheel would otherwise
+        lose speed while DDS discovery keeps the controller's first command from it).  The
+        pacing and the header clock are anchored here, at t = 0."""
         def nodes(infos):
             return {(i.node_namespace, i.node_name) for i in infos}
         connected = self.sub_cmd.get_publisher_count() > 0 and bool(
