@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from hasel_wheel_common import protocol as P
 from hasel_wheel_common.samples import Command, TelemetrySample
 
 from hasel_wheel_sim.params import WheelParams
@@ -50,6 +51,7 @@ class SimRuntime:
         self.overruns = 0
         self.last_rejection = ""
         self.last_rejection_code = 0     # protocol reject reason of the last refused command
+        self.hv_enabled = True           # False after an HV-off request: commands are refused
 
     def set_time_scale(self, scale: float) -> None:
         """Simulated seconds per wall second, in (0, 100]."""
@@ -58,9 +60,23 @@ class SimRuntime:
         self.time_scale = float(scale)
         self._wall0 = None  # re-anchor the pacing at the next call
 
+    def set_hv(self, enabled: bool) -> None:
+        """HV on or off, as the device's HV frame: off switches every pad off at once, forgets
+        the pending and latched command and refuses commands (reason HV disabled) until HV is
+        on again (``test_sim_runtime.py::test_hv_off_cuts_the_pad_and_refuses_commands``)."""
+        self.hv_enabled = bool(enabled)
+        if not self.hv_enabled:
+            self._pending = None
+            self.plant.wheel.cut_hv()
+
     def submit(self, command: Command) -> str | None:
         """Queue a command for the next tick; return the rejection reason, or None if accepted."""
         self.commands_received += 1
+        if not self.hv_enabled:
+            self.commands_rejected += 1
+            self.last_rejection = "HV is off (hv_request false)"
+            self.last_rejection_code = P.R_HV_DISABLED
+            return self.last_rejection
         try:
             validate_command(command.n_a, command.phi_a, command.phi_d)
         except CommandError as exc:
@@ -98,6 +114,7 @@ class SimRuntime:
         s = self.plant.wheel.state
         return {"sim_time_s": f"{self.plant.t:.3f}", "time_scale": f"{self.time_scale:g}",
                 "speed_rad_s": f"{s.xi2:.4f}", "hv_on": str(bool(s.q)),
+                "hv_enabled": str(self.hv_enabled),
                 "actuator": str(s.actuator), "commands_received": str(self.commands_received),
                 "commands_rejected": str(self.commands_rejected),
                 "last_rejection": self.last_rejection, "samples_lost": str(self.samples_lost),

@@ -59,3 +59,19 @@ def test_good_command_is_applied_and_echoed():
     assert any(o.truth.q == 1 for o in outs)
     assert outs[-1].sample.last_command_sequence == 41
     assert outs[0].t == pytest.approx(TICK)
+
+
+def test_hv_off_cuts_the_pad_and_refuses_commands():
+    from hasel_wheel_common import protocol as P
+    from hasel_wheel_common.samples import Command
+    from hasel_wheel_sim import layout as L
+    rt = SimRuntime(initial_speed=2.0)
+    rt.submit(Command(1, 0.05, 0.38, 1))
+    while not rt.plant.wheel.s[L.S_Q]:
+        rt.step()
+    rt.set_hv(False)
+    assert rt.plant.wheel.s[L.S_Q] == 0.0 and rt.plant.wheel.s[L.S_ARMED] == 0.0
+    assert rt.submit(Command(3, 0.05, 0.38, 2)) is not None
+    assert rt.last_rejection_code == P.R_HV_DISABLED
+    rt.set_hv(True)
+    assert rt.submit(Command(3, 0.05, 0.38, 3)) is None
