@@ -135,11 +135,13 @@ def test_closed_loop_demo_writes_bag_plots_and_table(tmp_path, capsys):
     refs = [m.data for m in topics_seen["/wheel0/reference_speed"]]
     assert refs == [1.0, 1.5, 2.0, 2.5, 2.6, 2.0]                     # the Fig. 11 profile
     status = topics_seen["/wheel0/mpc_status"]
-    # every decision's command, after the runner's own start command (sequence 0, no status)
+    # from rest: first a START of the pad in contact (sequence 0, no status), then every
+    # decision's command
     commands = topics_seen["/wheel0/command"]
-    assert commands[0].sequence == 0 and commands[0].n_a == 1
-    assert len(status) == len(commands) - 1 > 50
-    assert [c.sequence for c in commands[1:]] == [s.command.sequence for s in status]
+    assert (commands[0].sequence, commands[0].n_a, commands[0].now) == (0, 0, True)
+    decided = [c for c in commands if c.sequence != 0]
+    assert len(status) == len(decided) > 50
+    assert [c.sequence for c in decided] == [s.command.sequence for s in status]
     assert all(s.candidates_evaluated >= 15 for s in status if not s.braking)
     est = topics_seen["/wheel0/state_estimate"]
     assert len(est) == len(topics_seen["/wheel0/telemetry"]) > 10000
@@ -184,7 +186,7 @@ def test_closed_loop_demo_records_runs_of_one_wheel_or_separate_wheels(tmp_path,
                                                                        same_wheel):
     """On a plant whose only random draw is the gain spread (no encoder noise), two runs of
     one wheel (``--same-wheel``) record the very same telemetry; two wheels, each with the
-    gains of its own seed, do not."""
+    gains of its own seed, do not.  (The plant has no start push: the wheels start rolling.)"""
     from hasel_wheel_bag.reader import bag_configuration, read_messages
     plant = tmp_path / "plant.yaml"
     plant.write_text(yaml.safe_dump({"plant": {"seed": 4, "switching": "tick", "effects": {
@@ -192,7 +194,7 @@ def test_closed_loop_demo_records_runs_of_one_wheel_or_separate_wheels(tmp_path,
         "encoder": {"enabled": True, "noise_std": {"value": 0.0, "unit": "rad"}}}}}))
     out = tmp_path / "o"
     args = ["demo", "--out", str(out), "--plant", str(plant), "--hold-scale", "0.04",
-            "--no-compare", "--wheels", "2"]
+            "--no-compare", "--wheels", "2", "--w0", "1.0"]
     assert cli.main(args + (["--same-wheel"] if same_wheel else [])) == 0
     capsys.readouterr()
     assert bag_configuration(out / "bag")["same_wheel"] == str(same_wheel).lower()
@@ -217,9 +219,9 @@ def test_the_comparison_runs_are_on_the_plant_of_the_first_wheel(monkeypatch):
         seen.append(("loop", plant_config))
         return real_loop(cfg, profile, plant_config, **kw)
 
-    def run(cfg, profile, duration, plant_config):
+    def run(cfg, profile, duration, plant_config, **kw):
         seen.append(("compare", plant_config))
-        return real_run(cfg, profile, duration, plant_config)
+        return real_run(cfg, profile, duration, plant_config, **kw)
 
     monkeypatch.setattr(D, "WheelLoop", loop)
     monkeypatch.setattr(D, "run_controller", run)

@@ -137,7 +137,7 @@ class WheelLoop:
         # the start command goes out before the first sample; recorded as mpc_node publishes
         # it, so every pad a bag's commands drive has its angles
         self._pending: Command | None = self.ctrl.start(self.plant.wheel.s[L.S_XI1], w0)
-        if recorder is not None:
+        if recorder is not None and self._pending is not None:
             recorder.command(ns, self._pending, 0.0)
         self._last_ref = None
 

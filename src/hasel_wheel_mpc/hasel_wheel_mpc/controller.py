@@ -50,9 +50,13 @@ class SpeedController:
         """The disturbance estimate [rad/s] (0 without an estimator)."""
         return self.core.d
 
-    def start(self, angle: float, speed: float) -> Command:
+    def start(self, angle: float, speed: float) -> Command | None:
         """The first start command, sent before the first sample, for a wheel at ``angle``
-        [rad] turning at ``speed`` [rad/s]."""
+        [rad] turning at ``speed`` [rad/s]; None for a standing wheel, which the core starts
+        from its first samples (the pad in contact is the one the encoder reads, so a replay
+        of the recording starts it alike)."""
+        if abs(speed) < self.config.start.still_speed:
+            return None
         cmd = self.core.sent_start(self.core.start_command(angle, speed), angle)
         self.observer.command_sent(cmd.sequence, cmd.phi_a, cmd.phi_d, cmd.now)
         return cmd

@@ -122,5 +122,5 @@ def test_every_packaged_plant_file_loads():
     realistic = load_plant_config(packaged("hasel_wheel_sim", "plant_realistic.yaml"))
     assert nominal.effects.enabled == frozenset()
     assert realistic.switching == "tick"
-    assert len(realistic.effects.enabled) == 10
+    assert len(realistic.effects.enabled) == 11
     assert math.isclose(realistic.effects.get("encoder", "noise_std"), 0.001)
