@@ -217,9 +217,9 @@ def test_the_comparison_runs_are_on_the_plant_of_the_first_wheel(monkeypatch):
         seen.append(("loop", plant_config))
         return real_loop(cfg, profile, plant_config, **kw)
 
-    def run(cfg, profile, duration, plant_config):
+    def run(cfg, profile, duration, plant_config, **kw):
         seen.append(("compare", plant_config))
-        return real_run(cfg, profile, duration, plant_config)
+        return real_run(cfg, profile, duration, plant_config, **kw)
 
     monkeypatch.setattr(D, "WheelLoop", loop)
     monkeypatch.setattr(D, "run_controller", run)
