@@ -19,6 +19,7 @@ from hasel_wheel_bag.cdr_flat import CDR_LE, flat_decoder
 from hasel_wheel_bag.layout import (CONFIG_RECORD, MCAP0_MAGIC, MCAP_DATA_ERRORS,
                                     NOTE_UNDECODABLE, BagError, BagErrorCode, BagNote,
                                     bag_metadata, has_summary, mcap_files)
+from hasel_wheel_bag.progress import progress_bar
 from hasel_wheel_bag.recovery import recovered_metadata, recovered_records
 
 
@@ -127,16 +128,8 @@ def _files(path: str | os.PathLike, topics: list[str] | None, say: Callable[[str
             if select is not None:
                 records = (r for r in records if select(r[1].topic))
             if progress:
-                records = _progress_bar(records, f"{progress}: {f.name}", total)
+                records = progress_bar(records, f"{progress}: {f.name}", total)
             yield f, records
-
-
-def _progress_bar(records: Iterator[Any], label: str, total: int | None) -> Iterator[Any]:
-    """``records`` with a tqdm bar on stderr (left out when stderr is not a terminal)."""
-    from tqdm import tqdm
-    with tqdm(records, desc=label, total=total, unit=" msg", unit_scale=True, disable=None,
-              leave=False, mininterval=0.5) as bar:
-        yield from bar
 
 
 def _named_errors(records: Iterator[Any], f: Path) -> Iterator[Any]:

@@ -27,6 +27,7 @@ from hasel_wheel_sim.plant import load_plant_config
 from hasel_wheel_sim.trials_support import braking_fall_time, open_loop_speed
 from hasel_wheel_sim.wheel import TICK
 
+from hasel_wheel_bag.progress import progress_bar
 from hasel_wheel_bringup import bag_cli
 from hasel_wheel_ident import cli as ident_cli
 from hasel_wheel_sim import paper
@@ -128,7 +129,7 @@ def cmd_demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     try:
         results = run_variants(plant_cfg, args.hold_scale, variants, rec, args.wheels,
-                               dict(args.set or []), args.same_wheel, args.w0)
+                               dict(args.set or []), args.same_wheel, args.w0, progress=True)
     finally:
         rec.close()
     wall = time.perf_counter() - t0
@@ -160,7 +161,7 @@ def cmd_table2(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     exact, tick = [], []
     try:
-        for spec in trials:
+        for spec in progress_bar(trials, "table2", unit="trial", scale=False):
             exact.append(run_trial(spec, params, dataclasses.replace(plant_cfg, switching="exact"),
                                    rec, f"/exact/{spec.label}"))
             spec_t = dataclasses.replace(spec, rule="after_measured")

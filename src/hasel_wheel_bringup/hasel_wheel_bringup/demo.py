@@ -42,7 +42,7 @@ def scaled_profile(scale: float):
 
 def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=None,
                  wheels: int = 1, overrides: dict | None = None, same_wheel: bool = False,
-                 w0: float = 0.0):
+                 w0: float = 0.0, progress: bool = False):
     """Run each variant on the scaled profile, the wheel starting at ``w0`` [rad/s] (0: from
     rest); the first is recorded (if ``recorder``).
 
@@ -53,7 +53,8 @@ def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=N
     actuator gains drawn once, from ``plant_config.seed`` (see
     :func:`~hasel_wheel_sim.plant.run_configs`); the comparison runs are on wheel 0's plant
     either way.  ``overrides`` ({'mpc.brake_phi_a': -0.384, ...}, see
-    ``ControllerConfig.with_overrides``) change every variant's controller.
+    ``ControllerConfig.with_overrides``) change every variant's controller.  ``progress``:
+    a bar of each run's simulated seconds on stderr (on a terminal).
     """
     profile, duration = scaled_profile(scale)
     plants = run_configs(plant_config, wheels, same_wheel=same_wheel)
@@ -62,15 +63,16 @@ def run_variants(plant_config, scale: float = 1.0, variants=VARIANTS, recorder=N
         cfg = controller_config(**kw)
         if overrides:
             cfg = cfg.with_overrides(overrides)
+        bar = f"demo {i + 1}/{len(variants)}: {label}" if progress else None
         if i == 0:
             loops = [WheelLoop(cfg, profile, pc, w0=w0, recorder=recorder, ns=f"/wheel{k}")
                      for k, pc in enumerate(plants)]
-            logs = run_wheels(loops, duration)
+            logs = run_wheels(loops, duration, bar)
             log = logs[0]
             extra = [VariantResult(f"{label}, /wheel{k}", lg, segment_metrics(lg, profile, duration))
                      for k, lg in enumerate(logs[1:], start=1)]
         else:
-            log = run_controller(cfg, profile, duration, plants[0], w0=w0)
+            log = run_controller(cfg, profile, duration, plants[0], w0=w0, progress=bar)
         out.append(VariantResult(label, log, segment_metrics(log, profile, duration)))
     return out + extra
 

@@ -56,7 +56,8 @@ def cmd_identify(args: argparse.Namespace) -> int:
     try:
         ident = identify(trials, base, library=lib, k_folds=args.folds,
                          max_effects=args.max_effects, threads=args.threads,
-                         progress=None if args.quiet else print)
+                         progress=None if args.quiet else print,
+                         progress_bars=None if args.quiet else "identify")
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -109,8 +110,8 @@ def cmd_trials(args: argparse.Namespace) -> int:
         print(f"error: --session-gap {args.session_gap!r}: expected seconds >= 0",
               file=sys.stderr)
         return 2
-    trials = (S.record_set(specs, base, cfg) if args.session_gap is None else
-              S.record_session(specs, args.session_gap, base, cfg))
+    trials = (S.record_set(specs, base, cfg, progress="trials") if args.session_gap is None
+              else S.record_session(specs, args.session_gap, base, cfg, progress="trials"))
     for tr in trials:
         write_csv(tr, out / f"{tr.name}.csv")
         print(f"{out / (tr.name + '.csv')}: {tr.duration:.1f} s")
@@ -129,7 +130,7 @@ def add_parsers(sub) -> None:
     i.add_argument("--folds", type=int, default=5, help="k of the k-fold by trial (default 5)")
     i.add_argument("--max-effects", type=int, default=2)
     i.add_argument("--threads", type=int, default=2)
-    i.add_argument("--quiet", action="store_true", help="no progress lines")
+    i.add_argument("--quiet", action="store_true", help="no progress lines or bars")
     i.add_argument("--compare-plant", default=None,
                    help="plant yaml: run the closed loop with nominal vs identified controller")
     i.set_defaults(func=cmd_identify)

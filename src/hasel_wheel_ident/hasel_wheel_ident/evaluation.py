@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hasel_wheel_bag.progress import progress_bar
 from hasel_wheel_sim.params import WheelParams
 
 from hasel_wheel_ident.candidates import Candidate
@@ -58,7 +59,8 @@ def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, .
              threads: int = 2, cv_below: float | None = None,
              sim_below: float | None = None,
              refuse: Callable[[FitResult], object | None] | None = None,
-             x0: np.ndarray | None = None, max_nfev: int = 100) -> Evaluation:
+             x0: np.ndarray | None = None, max_nfev: int = 100,
+             progress: str | None = None) -> Evaluation:
     """Fit on all trials from ``start`` (``window`` [s]), then per fold on the rest
     (warm-started from the full fit), and score the held-out trials with their window
     starts re-solved.
@@ -68,7 +70,8 @@ def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, .
     free-run error on its own trials is not below ``sim_below`` [rad/s]; or ``refuse``
     returns a refusal (not None).  ``threads``: the threads of the fit on all trials and
     the folds run side by side.  ``x0`` (w, 2) and ``max_nfev``: the fit on all trials'
-    window starts and evaluation limit (:meth:`~.fit.Problem.fit`).  Tested in
+    window starts and evaluation limit (:meth:`~.fit.Problem.fit`).  ``progress``, when
+    given, labels a bar of the folds on stderr (on a terminal).  Tested in
     ``test_ident_effects.py::test_a_refit_refused_on_all_trials_is_not_cross_validated``."""
     problem = Problem(trials, base, effects, window, threads=threads)
     full = problem.fit(start=start, x0=x0, max_nfev=max_nfev)
@@ -80,13 +83,14 @@ def evaluate(trials: list[Trial], base: WheelParams, effects: tuple[Candidate, .
         if len(trials) >= 2:
             ev.heldout_rmse = math.nan
         return ev
-    _cross_validate(ev, problem, trials, base, effects, window, folds, max(threads, 1))
+    _cross_validate(ev, problem, trials, base, effects, window, folds, max(threads, 1),
+                    progress)
     return ev
 
 
 def _cross_validate(ev: Evaluation, problem: Problem, trials: list[Trial], base: WheelParams,
                     effects: tuple[Candidate, ...], window: float, folds: list[list[int]],
-                    workers: int) -> None:
+                    workers: int, progress: str | None = None) -> None:
     """Fit each fold on the other trials (``workers`` folds side by side, one thread each;
     a fold left alone at the end gets them all) and set ``ev``'s held-out figures."""
     full = ev.fit
@@ -107,7 +111,10 @@ def _cross_validate(ev: Evaluation, problem: Problem, trials: list[Trial], base:
 
     sq = n = 0.0
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        for held, pt, theta, x, r, values in pool.map(one_fold, enumerate(folds)):
+        fits = pool.map(one_fold, enumerate(folds))
+        if progress:
+            fits = progress_bar(fits, progress, len(folds), unit="fold", scale=False)
+        for held, pt, theta, x, r, values in fits:
             for j, (i, s) in enumerate(zip(held, pt.trial_slices)):
                 tr = trials[i]
                 rr = r[s][pt.ok[s]]

@@ -9,6 +9,7 @@ import dataclasses
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
+from hasel_wheel_bag.progress import progress_bar
 
 from hasel_wheel_ident.acceptance import judge, optimum_not_effect, pick, poorer_optimum
 from hasel_wheel_ident.candidates import BY_ID, Candidate
@@ -32,13 +33,15 @@ class Settings:
     """The search's bounds: ``min_gain`` [1] the held-out free-run bar, ``max_effects`` the
     most effects named, ``max_refits`` the most refits per round, ``threads`` the workers;
     ``short_fits``: a bent fit's candidates may be screened by short fits from the reference
-    force law (:meth:`Search._screen`)."""
+    force law (:meth:`Search._screen`); ``progress``, when given, labels bars on stderr (on
+    a terminal) of the candidates screened and of each refit's folds."""
 
     min_gain: float = 0.10
     max_effects: int = 2
     max_refits: int = 2
     threads: int = 2
     short_fits: bool = True
+    progress: str | None = None
 
 
 class Search:
@@ -146,7 +149,11 @@ class Search:
         order = sorted(todo, key=lambda c: -((2 + 2 * len(c.screen_at)) * (17 + c.size)
                                              + 24 * len(c.scan)))
         with ThreadPoolExecutor(max_workers=max(self.s.threads, 1)) as pool:
-            done = dict(zip((c.id for c in order), pool.map(score, order)))
+            scored = pool.map(score, order)
+            if self.s.progress:
+                scored = progress_bar(scored, f"{self.s.progress}: screening", len(order),
+                                      unit="candidate", scale=False)
+            done = dict(zip((c.id for c in order), scored))
         return [done[c.id] for c in todo]
 
     # -- refits -------------------------------------------------------------------------
@@ -174,6 +181,10 @@ class Search:
             evs.append(self._refit_pair(*pair))
         return evs
 
+    def _bar(self, model: str) -> str | None:
+        """The label of the bar of ``model``'s folds (None: no bar)."""
+        return f"{self.s.progress}: {model}" if self.s.progress else None
+
     def _gates(self, effects: tuple[Candidate, ...], added: tuple[Candidate, ...]) -> dict:
         """:func:`~.evaluation.evaluate`'s gates for the current model plus ``added``."""
         return dict(cv_below=self.current.fit.rmse,
@@ -188,11 +199,12 @@ class Search:
         effects = self.chosen + (c,)
         gates = self._gates(effects, (c,))
         ev = evaluate(self.trials, self.base, effects, self.window, sc.start,
-                      self.ident.folds, self.s.threads, **gates)
+                      self.ident.folds, self.s.threads, **gates, progress=self._bar(c.id))
         if ev.fit.rmse > current.fit.rmse:
             self.say(f"  {c.id}: refit from the current model (the screened start fitted worse)")
             ev = evaluate(self.trials, self.base, effects, self.window,
-                          dict(current.fit.values), self.ident.folds, self.s.threads, **gates)
+                          dict(current.fit.values), self.ident.folds, self.s.threads, **gates,
+                          progress=self._bar(c.id))
         judge(ev, (c,), current, self.s.min_gain, self.refusals(ev.fit, effects, (c,)))
         if not ev.accepted and (backed(ev, current, self.s.min_gain) or (
                 stood_in(ev, current, self.s.min_gain) and not current.fit.converged)):
@@ -211,7 +223,7 @@ class Search:
         alt = evaluate(self.trials, self.base, effects, self.window,
                        {**current.fit.values, **ref,
                         **{p.name: sc.start[p.name] for p in c.params}},
-                       self.ident.folds, self.s.threads, **gates)
+                       self.ident.folds, self.s.threads, **gates, progress=self._bar(c.id))
         self.say(f"  {c.id}: refused from its screened start although it cuts the window "
                  f"RMSE to {1e3 * ev.fit.rmse:.3f} mrad; from the reference force law "
                  f"{1e3 * alt.fit.rmse:.3f} mrad")
@@ -241,7 +253,8 @@ class Search:
         ev = evaluate(self.trials, self.base, effects, self.window,
                       {**first.fit.values,
                        **{p.name: other.fit.values[p.name] for p in added[1].params}},
-                      self.ident.folds, self.s.threads, **self._gates(effects, added))
+                      self.ident.folds, self.s.threads, **self._gates(effects, added),
+                      progress=self._bar("+".join(c.id for c in added)))
         judge(ev, added, self.current, self.s.min_gain, self.refusals(ev.fit, effects, added))
         ev.reason += f"; tried together: {why_pair}"
         ev.codes.append(Reason.TRIED_TOGETHER)
@@ -297,7 +310,7 @@ class Search:
         self.restarted = True
         current = evaluate(self.trials, self.base, self.chosen, self.window,
                            dict(check.fit.values), self.ident.folds, self.s.threads,
-                           x0=check.fit.x0)
+                           x0=check.fit.x0, progress=self._bar("current model"))
         current.accepted = True
         current.reason = ("+".join(c.id for c in self.chosen) or "nominal model") + \
             " (refitted from a better optimum)"

@@ -38,7 +38,7 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
              min_gain: float = 0.10, max_effects: int = 2, max_refits: int = 2,
              threads: int = 2, analyse_residuals: bool = True,
              progress: Callable[[str], None] | None = None,
-             short_fits: bool = True) -> Identification:
+             short_fits: bool = True, progress_bars: str | None = None) -> Identification:
     """Identify the model of ``trials`` (at least 2; ``k_folds`` >= 2 folds by trial), taken
     as one session (:func:`~.session.as_session`: in session order when they carry session
     times, effects with memory carried from one to the next):
@@ -46,7 +46,9 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     error by ``min_gain`` [1] or more, up to ``max_effects``.  ``short_fits``: screen the
     candidates of a bent fit by short fits from the reference force law too
     (:func:`~.screen.bent`).  ``progress`` (e.g.
-    ``print``) gets one line per step with the elapsed wall time.  Raises
+    ``print``) gets one line per step with the elapsed wall time; ``progress_bars``, when
+    given, labels bars on stderr (on a terminal) of the candidates screened and of each
+    model's folds.  Raises
     :class:`~.reasons.InputRefused` (code ``TOO_FEW_TRIALS`` or ``TOO_FEW_FOLDS``).
     Tested in ``test_ident_effects.py``."""
     _check_inputs(trials, k_folds)
@@ -60,9 +62,10 @@ def identify(trials: list[Trial], base: WheelParams | None = None,
     if trend is not None:
         say(trend.text())
     ident = _nominal(along_the_trend(session.trials, trend) if trend and trend.significant
-                     else session.trials, base, window, k_folds, min_gain, threads, say)
+                     else session.trials, base, window, k_folds, min_gain, threads, say,
+                     progress_bars)
     ident.session, ident.coast_friction, ident.friction_trend = session, coasts, trend
-    settings = Settings(min_gain, max_effects, max_refits, threads, short_fits)
+    settings = Settings(min_gain, max_effects, max_refits, threads, short_fits, progress_bars)
     search = Search(ident, library, settings, say)
     search.run()
     if ident.session is not None and ident.session.timed:
@@ -96,7 +99,8 @@ def _stopwatch(progress: Callable[[str], None] | None) -> Callable[[str], None]:
 
 
 def _nominal(trials: list[Trial], base: WheelParams, window: float, k_folds: int,
-             min_gain: float, threads: int, say: Callable[[str], None]) -> Identification:
+             min_gain: float, threads: int, say: Callable[[str], None],
+             progress_bars: str | None = None) -> Identification:
     """The record with the nominal model fitted and cross-validated (code ``NOMINAL``),
     tau_f from the coast-downs when the trials have them."""
     friction = coastdown_friction(trials, base)
@@ -104,7 +108,8 @@ def _nominal(trials: list[Trial], base: WheelParams, window: float, k_folds: int
     folds = folds_of(len(trials), k_folds)
     say(f"tau_f from coast-downs: {friction.tau_f:.6f} N*m" if friction else
         "no coast-down: tau_f is fitted with the force law")
-    nominal = evaluate(trials, base, (), window, start, folds, threads)
+    nominal = evaluate(trials, base, (), window, start, folds, threads,
+                       progress=f"{progress_bars}: nominal model" if progress_bars else None)
     say(f"nominal model: window RMSE {1e3 * nominal.fit.rmse:.3f} mrad, held-out "
         f"{1e3 * nominal.heldout_rmse:.3f} mrad ({nominal.fit.nfev} evaluations"
         + ("" if nominal.fit.converged else ", stopped at the limit: not converged") + ")")

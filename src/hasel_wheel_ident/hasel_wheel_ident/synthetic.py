@@ -15,6 +15,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from hasel_wheel_bag.progress import progress_bar
 from hasel_wheel_sim import layout as L
 from hasel_wheel_sim.effects import effects_from_mapping
 from hasel_wheel_sim.params import WheelParams
@@ -109,7 +110,8 @@ SESSION_SET = tuple(PAPER_SET[k] for k in (2, 0, 4, 1, 3))
 
 def record_session(specs=SESSION_SET, gap: float = 20.0, params: WheelParams | None = None,
                    config: PlantConfig | None = None, changes: SessionChanges = SessionChanges(),
-                   recorder: Any = None, ns: str = "/wheel") -> list[Trial]:
+                   recorder: Any = None, ns: str = "/wheel", progress: str | None = None
+                   ) -> list[Trial]:
     """Trials of ``specs`` run back to back on one plant, as a researcher records a session:
     after each trial's coast the wheel is held at rest with HV off for ``gap`` [s], then
     started at the next trial's initial speed.  The plant is never reset, so a retained
@@ -119,7 +121,7 @@ def record_session(specs=SESSION_SET, gap: float = 20.0, params: WheelParams | N
     (:class:`~hasel_wheel_mpc.recorder.Recorder`), every sample of the session (gaps
     included) is written under ``ns`` as the driver would record it: telemetry, and a
     command each time the schedule latches another one (HV reads 0 while nothing is
-    latched)."""
+    latched).  ``progress``, when given, labels a bar of the trials on stderr (on a terminal)."""
     plant = Plant(params, config or PlantConfig(switching="tick"))
     wheel = plant.wheel
     tau0 = float(wheel.pv[L.P_FRICTION])
@@ -128,8 +130,10 @@ def record_session(specs=SESSION_SET, gap: float = 20.0, params: WheelParams | N
     def drift() -> None:                        # the friction at this tick's session time
         wheel.pv[L.P_FRICTION] = tau0 * (1.0 + changes.friction_rate * plant.t)
 
-    out = []
-    for k, spec in enumerate(specs):
+    out, each = [], specs
+    if progress:
+        each = progress_bar(specs, progress, len(specs), unit="trial", scale=False)
+    for k, spec in enumerate(each):
         if changes.step_pad is not None and k == changes.step_trial:
             wheel.pv[L.P_GAINS + changes.step_pad] *= changes.step_factor
         wheel.s[L.S_XI2] = spec.initial_speed
@@ -211,14 +215,18 @@ class _BagLog:
 
 
 def record_set(specs=PAPER_SET, params: WheelParams | None = None,
-               config: PlantConfig | None = None) -> list[Trial]:
+               config: PlantConfig | None = None, progress: str | None = None) -> list[Trial]:
     """Several trials of the same wheel: trial i draws its noise from seed ``config.seed + i``,
-    while the wheel's actuator gains (if spread) are drawn once, from ``config.seed``."""
+    while the wheel's actuator gains (if spread) are drawn once, from ``config.seed``.
+    ``progress``, when given, labels a bar of the trials on stderr (on a terminal)."""
     specs = list(specs)
     if not specs:
         return []
     configs = run_configs(config or PlantConfig(switching="tick"), len(specs), same_wheel=True)
-    return [record(spec, params, cfg) for spec, cfg in zip(specs, configs)]
+    runs = zip(specs, configs)
+    if progress:
+        runs = progress_bar(runs, progress, len(specs), unit="trial", scale=False)
+    return [record(spec, params, cfg) for spec, cfg in runs]
 
 
 def encoder_trials(effects: dict, seed: int = 3, specs=SHORT_SET) -> list[Trial]:

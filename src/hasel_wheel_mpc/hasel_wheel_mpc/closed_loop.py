@@ -103,16 +103,24 @@ def controller_config(estimator_gain: float | None = TRACKING_GAIN, speed_source
 def run_controller(cfg: ControllerConfig, profile=FIG11_PROFILE,
                    duration: float = FIG11_DURATION, plant_config: PlantConfig | None = None,
                    params: WheelParams | None = None, w0: float = 1.0, recorder=None,
-                   ns: str = "/wheel0", clock: Callable[[], float] | None = None) -> LoopLog:
-    """:func:`run_closed_loop` with the controller given as a :class:`ControllerConfig`."""
+                   ns: str = "/wheel0", clock: Callable[[], float] | None = None,
+                   progress: str | None = None) -> LoopLog:
+    """:func:`run_closed_loop` with the controller given as a :class:`ControllerConfig`;
+    ``progress`` as :func:`run_wheels`'s."""
     return run_wheels([WheelLoop(cfg, profile, plant_config, params, w0, recorder, ns, clock)],
-                      duration)[0]
+                      duration, progress)[0]
 
 
-def run_wheels(wheels: list["WheelLoop"], duration: float) -> list[LoopLog]:
+def run_wheels(wheels: list["WheelLoop"], duration: float,
+               progress: str | None = None) -> list[LoopLog]:
     """Step several wheels in lockstep for ``duration`` [s] (one tick each, in turn), so a
-    shared recorder writes their messages in time order; returns each wheel's log."""
-    for _ in range(int(duration / TICK)):
+    shared recorder writes their messages in time order; returns each wheel's log.
+    ``progress``, when given, labels a bar of the simulated seconds on stderr (on a terminal)."""
+    ticks = range(int(duration / TICK))
+    if progress:
+        from hasel_wheel_bag.progress import progress_bar
+        ticks = progress_bar(ticks, progress, unit=" s", scale=TICK)
+    for _ in ticks:
         for w in wheels:
             w.step()
     return [w.log for w in wheels]
