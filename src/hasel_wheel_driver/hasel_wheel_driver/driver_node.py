@@ -1,7 +1,7 @@
-"""driver_node: the wheel's Teensy (USB serial, protocol v1) as ROS 2 topics.
+"""driver_node: the wheel's Teensy (USB serial, protocol v1.1) as ROS 2 topics.
 
 Publishes ``telemetry``, ``joint_states`` and ``/diagnostics``; forwards ``command`` after
-validating it.  Serial I/O runs in the driver core's own thread, so the executor never waits
+validating it, as a START when its ``now`` is true.  Serial I/O runs in the driver core's own thread, so the executor never waits
 on the port.  HV: off until ``hv_enabled`` is set true; off again on shutdown (SIGINT/SIGTERM),
 on a stale or lost link, and whenever the device's watchdog trips.  The serial link opens
 once ``telemetry_subscribers`` subscriptions match ``telemetry`` (or after
@@ -125,12 +125,15 @@ class DriverNode(Node):
         self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
 
     def _on_event(self, event: str) -> None:
-        self.get_logger().warn(f"link: {event}") if "lost" in event or "stale" in event \
-            else self.get_logger().info(f"link: {event}")
+        if any(w in event for w in ("lost", "stale", "v1.0")):
+            self.get_logger().warn(f"link: {event}")
+        else:
+            self.get_logger().info(f"link: {event}")
 
     def _on_command(self, msg: ActuationCommand) -> None:
         why = self.core.send_command(samples.Command(int(msg.n_a), float(msg.phi_a),
-                                                     float(msg.phi_d), int(msg.sequence)))
+                                                     float(msg.phi_d), int(msg.sequence),
+                                                     now=bool(msg.now)))
         if why:
             self.commands_refused += 1
             self.get_logger().warn(f"command {msg.sequence} not sent, HV stays off for it: {why}")

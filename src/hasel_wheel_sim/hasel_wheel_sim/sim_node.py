@@ -101,7 +101,8 @@ class SimNode(Node):
 
     def _on_command(self, msg: ActuationCommand) -> None:
         reason = self.core.submit(samples.Command(int(msg.n_a), float(msg.phi_a),
-                                                  float(msg.phi_d), int(msg.sequence)))
+                                                  float(msg.phi_d), int(msg.sequence),
+                                                  now=bool(msg.now)))
         if reason:
             self.get_logger().warn(f"command {msg.sequence} rejected, HV stays off for it: {reason}")
 
