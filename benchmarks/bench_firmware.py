@@ -4,8 +4,9 @@
   telemetry encoded), counted by valgrind's callgrind inside ``Device::tick`` and
   ``Device::receive`` only, as the difference of a 11,000- and a 1,000-tick run (start-up
   cancels): the typical tick (a heartbeat every 6th tick, a command every 20th), and the
-  512-byte receive buffer full at every tick, of commands or of the smallest frames (the
-  most answers): the worst of these two is the worst tick;
+  512-byte receive buffer full at every tick, of commands, of STARTs that go through every
+  check of rule 8, or of the smallest frames (the most answers): the worst of these three is
+  the worst tick;
 * the same converted to the Teensy 3.6 (Cortex-M4F at 180 MHz) with a stated factor, plus the
   board's I/O per tick, against the tick period (target: worst case below the 3.33 ms tick);
 * the lockstep of the C++ core with the Python device core over 60 s of the realistic plant
@@ -33,7 +34,7 @@ TEENSY_HZ = 180e6
 #: 1 us edges (34), two 12-bit ADC reads (about 10 each), USB writes of the tick's frames
 #: (about 1 us per 10 bytes: 5 typical, 100 with a full buffer's answers).
 IO_US = {"typical": 34 + 34 + 20 + 5, "commands": 34 + 34 + 20 + 100,
-         "answers": 34 + 34 + 20 + 100}
+         "starts": 34 + 34 + 20 + 100, "answers": 34 + 34 + 20 + 100}
 TICK_US = 1e6 / 300
 
 
@@ -55,7 +56,7 @@ def main() -> None:
     if shutil.which("valgrind") is None:
         print("  valgrind not found: install it (apt-get install valgrind) for this figure")
     else:
-        for mode in ("typical", "commands", "answers"):
+        for mode in ("typical", "commands", "starts", "answers"):
             n = instructions_per_tick(str(build / "hasel_tick_bench"), mode)
             core_us = n * CYCLES_PER_HOST_INSTRUCTION / TEENSY_HZ * 1e6
             total = core_us + IO_US[mode]

@@ -47,7 +47,7 @@ struct hw_outputs {
 struct hw_latched {
   int64_t valid, seq, n_a;
   double phi_a, phi_d;
-  int64_t sector, on_count, off_count;
+  int64_t sector, on_count, off_count, now;
 };
 
 struct hw_state {
@@ -85,7 +85,8 @@ size_t hw_device_tick(void* d, uint64_t now_us, const hw_sensors* in, uint8_t* t
 }
 
 static void copy_latched(const hasel::Latched& l, hw_latched* o) {
-  *o = hw_latched{l.valid, l.seq, l.n_a, l.phi_a, l.phi_d, l.sector, l.on_count, l.off_count};
+  *o = hw_latched{l.valid, l.seq, l.n_a, l.phi_a, l.phi_d, l.sector, l.on_count, l.off_count,
+                  l.now};
 }
 
 void hw_device_state(void* d, hw_state* o) {

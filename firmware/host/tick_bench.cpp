@@ -2,6 +2,8 @@
 // instructions one tick costs (benchmarks/bench_firmware.py).
 //   hasel_tick_bench TICKS typical    a heartbeat every 6th tick and a command every 20th
 //   hasel_tick_bench TICKS commands   the receive buffer full of commands at every tick
+//   hasel_tick_bench TICKS starts     the receive buffer full of STARTs for a pad not in
+//                                     contact at every tick: each goes through every check
 //   hasel_tick_bench TICKS answers    the receive buffer full of the smallest frames (8 bytes,
 //                                     CLEAR_ESTOP) at every tick: the most answers per tick
 #include <cstdint>
@@ -40,12 +42,22 @@ hasel::Message command(long k) {
   return c;
 }
 
+// A START for the pad half a turn from the one in contact at count c: REJECTed (reason 7)
+// after every check of rule 8.
+hasel::Message start(long k, long c) {
+  hasel::Message m = command(k);
+  m.type = hasel::kStart;
+  m.n_a = uint8_t((c / 64 + 8) % 16);
+  return m;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   long ticks = argc > 1 ? std::atol(argv[1]) : 0;
   const char* mode = argc > 2 ? argv[2] : "typical";
   bool commands = std::strcmp(mode, "commands") == 0;
+  bool starts = std::strcmp(mode, "starts") == 0;
   bool answers = std::strcmp(mode, "answers") == 0;
   hasel::Message clear;
   clear.type = hasel::kClearEstop;
@@ -64,6 +76,9 @@ int main(int argc, char** argv) {
     now += 3333;
     if (commands) {
       while (host.send(command(k))) {
+      }
+    } else if (starts) {
+      while (host.send(start(k, (k * 3) % 1024))) {
       }
     } else if (answers) {
       while (host.send(clear)) {

@@ -5,8 +5,8 @@ virtual Teensy does; the C++ core, built for the host, gets exactly the same hos
 sensor readings and device time on every tick.  The host is the MPC speed controller, fed
 from the device's telemetry, and a schedule of faults: corrupted and cut host frames, host
 silence, an over-current sample, an HV sag, an emergency stop, configuration (a short
-maximum on-time, a faster tick) and invalid input, HV off by the host, a device reset and a
-failing encoder.  Every tick the two cores' frames must match byte for byte and their states field by field.
+maximum on-time, a faster tick) and invalid input, HV off by the host, START frames (protocol
+v1.1: accepted, and refused for each of its reasons), a device reset and a failing encoder.  Every tick the two cores' frames must match byte for byte and their states field by field.
 ``test_firmware_lockstep.py`` holds the result; ``benchmarks/bench_firmware.py`` prints it.
 """
 from __future__ import annotations
@@ -37,6 +37,7 @@ class LockstepReport:
     bytes: int = 0
     switch_ons: int = 0
     commands_acked: int = 0
+    starts_acked: int = 0
     rejects: dict[int, int] = field(default_factory=dict)   # reason -> count
     faults_seen: int = 0                 # OR of every telemetry fault_flags
     host_frames_dropped: int = 0         # by the device's decoder (CRC, framing, ...)
@@ -56,9 +57,12 @@ class _Host:
         self.decoder = P.FrameDecoder()
         self.out = bytearray()
         self.silent = False
+        self.last_count = fw.plant.encoder_raw    # unwrapped count of the last telemetry
         self.send(P.Hv(1))
         s = fw.plant.wheel.s
-        self.send_command(self.ctrl.start(float(fw.plant.encoder_raw) * P.SECTOR / 64, s[2]))
+        first = self.ctrl.start(float(fw.plant.encoder_raw) * P.SECTOR / 64, s[2])
+        if first is not None:                 # a standing wheel is started from its samples
+            self.send_command(first)
 
     def send(self, msg: P.Message, damage: str = "") -> None:
         self.counter = (self.counter + 1) & 0xFFFF
@@ -71,7 +75,16 @@ class _Host:
             self.out += b"\x00" + wire
 
     def send_command(self, c) -> None:
-        self.send(P.Command(c.sequence, c.n_a, c.phi_a, c.phi_d))
+        """A controller's Command as COMMAND, or as START when ``c.now``."""
+        self.send((P.Start if c.now else P.Command)(c.sequence, c.n_a, c.phi_a, c.phi_d))
+
+    def send_starts(self, k: int) -> None:
+        """Three STARTs for the pad sectors from the last count: one not in contact (REJECT
+        7), one in contact within [0, pi/8) (ACK, while no pad is on), one more (REJECT 8)."""
+        n_a = (self.last_count // 64) % 16
+        self.send(P.Start(3 * 10**6 + k, (n_a + 8) % 16, 0.05, 0.3))
+        self.send(P.Start(3 * 10**6 + k + 1, n_a, 0.0, P.SECTOR))
+        self.send(P.Start(3 * 10**6 + k + 2, n_a, 0.0, P.SECTOR))
 
     def take(self) -> bytes:
         data, self.out = bytes(self.out), bytearray()
@@ -82,11 +95,14 @@ class _Host:
             m = f.message
             if f.type == P.TELEMETRY:
                 report.faults_seen |= m.fault_flags
+                self.last_count = m.encoder_unwrapped
                 r = self.ctrl.step(as_received(from_device(m)), self.reference)
                 if r.command is not None:
                     self.send_command(r.command)
             elif f.type == P.ACK and m.acked_type == P.COMMAND:
                 report.commands_acked += 1
+            elif f.type == P.ACK and m.acked_type == P.START:
+                report.starts_acked += 1
             elif f.type == P.REJECT:
                 report.rejects[m.reason] = report.rejects.get(m.reason, 0) + 1
 
@@ -112,6 +128,7 @@ def _faults(k: int, host: _Host) -> dict:
     if sec == 35 and tick == 0:                              # emergency stop
         host.send(P.Estop())
         host.send(P.Hv(1))                                   # refused while latched
+        host.send(P.Start(4 * 10**6 + k, 0, 0.0, P.SECTOR))  # refused while latched
     if sec == 35 and tick == 15:
         host.send(P.ClearEstop())
         host.send(P.Hv(1))
@@ -123,11 +140,16 @@ def _faults(k: int, host: _Host) -> dict:
         host.send(P.Config(300, 100, 10, 0))                 # a 10 ms maximum on-time
         host.send(P.Config(300, 5, 2000, 0))
         host.send(P.Command(2 * 10**6 + k, 17, 0.05, 0.3))
+        host.send(P.Start(2 * 10**6 + k + 1, 3, 0.3, 0.05))   # phi_a > phi_d
         host.send(P.Hv(2))
     if sec == 50 and tick == 150:
         host.send(P.Config(300, 100, 2000, 0))
     if sec == 52 and tick in (0, 30):                        # the host switches HV off, on
         host.send(P.Hv(int(tick == 30)))
+    if sec == 52 and tick == 1:                              # a START without HV
+        host.send(P.Start(5 * 10**6 + k, 0, 0.0, P.SECTOR))
+    if sec == 52 and tick == 30:                             # STARTs right after HV is on
+        host.send_starts(k)
     if sec == 54 and tick in (0, 150):                       # 500 Hz ticks for a while
         host.send(P.Config(500 if tick == 0 else 300, 100, 2000, 0))
     if sec == 56 and tick == 0:                              # the device resets (brown-out)

@@ -1,5 +1,6 @@
 """End to end over a real pseudo-terminal: the virtual Teensy (plant + firmware) and the
-driver core (pyserial), 30 s of simulated wheel time at 300 Hz, with and without faults."""
+driver core (pyserial), 30 s of simulated wheel time at 300 Hz, with and without faults; and
+START (protocol v1.1) to a standing wheel, from a v1.1 and from a v1.0 device."""
 import gc
 import math
 import os
@@ -11,12 +12,15 @@ import time
 import pytest
 
 from hasel_wheel_common import protocol as P
-from hasel_wheel_driver.link import DriverCore, LinkConfig
+from hasel_wheel_common.samples import Command
+from hasel_wheel_driver.link import DriverCore, LinkConfig, RefusalCode
 from hasel_wheel_bringup.sequencer import Sequencer
+from hasel_wheel_sim.device_core import DeviceCore
 from hasel_wheel_sim.device_process import DeviceProcess
+from hasel_wheel_sim.firmware import Firmware
 from hasel_wheel_sim.model import SECTOR, unwrap_target
-from hasel_wheel_sim.plant import COUNT
-from hasel_wheel_sim.pty_device import LinkFaults
+from hasel_wheel_sim.plant import COUNT, Plant, PlantConfig
+from hasel_wheel_sim.pty_device import LinkFaults, VirtualTeensy
 
 SCALE = 5.0               # simulated seconds per wall second
 SIM_SECONDS = 30.0        # simulated wheel time of the long runs [s]
@@ -392,3 +396,57 @@ def test_a_device_that_was_not_scheduled_does_not_blame_the_host(tmp_path):
     # 0.3 s of ticks and the catch-up limit besides (a device scheduled late runs fewer)
     assert status["t"] - t_before < 1.8 - 1.0
 
+
+# -- START (protocol v1.1, rule 8) to a standing wheel ---------------------------------------
+
+class V10Core(DeviceCore):
+    """The Python device core as protocol v1.0 has it: no START.  Its decoder drops the frame
+    as an unknown type, which answers nothing and does not restart the watchdog."""
+
+    def _handle(self, frame: P.Frame) -> None:
+        if frame.type == P.START:
+            self.decoder.stats.type_errors += 1
+            return
+        super()._handle(frame)
+
+
+@pytest.fixture
+def standing(tmp_path):
+    """A factory: a virtual Teensy (the given core) with the wheel at rest, pad 0 at 10 deg,
+    and a started link with HV on."""
+    made = []
+
+    def make(core):
+        fw = Firmware(Plant(config=PlantConfig(), xi1=math.radians(10), xi2=0.0), core)
+        vt = VirtualTeensy(fw, tmp_path / "usb-Teensyduino_HASEL_wheel-if00").start()
+        link = DriverCore(LinkConfig(str(vt.link), enable_hv_on_connect=True)).start()
+        made.append((vt, link))
+        assert wait(lambda: link.last_telemetry is not None and link.last_telemetry.hv_monitor > 0,
+                    10.0)
+        return vt, link
+    yield make
+    for vt, link in made:
+        link.shutdown()
+        vt.stop()
+
+
+def test_a_v1_1_device_switches_the_standing_wheels_pad_on_at_once(standing):
+    vt, link = standing(DeviceCore())
+    assert link.send_command(Command(0, math.radians(3), math.radians(22), 41, now=True)) is None
+    assert wait(lambda: link.last_telemetry.q == 1 and link.last_telemetry.last_command_seq == 41,
+                10.0)
+    tel = link.last_telemetry
+    assert (tel.eta_unwrapped, tel.active_mask) == (0, 1 << 0)
+    time.sleep(2 * link.config.ack_timeout)
+    assert not link.stats.device_v1_0 and link.stats.starts_unanswered == 0
+    assert any(h.frame.type == P.START for h in vt.received)
+
+
+def test_a_v1_0_device_answers_no_start_and_the_link_refuses_the_next(standing):
+    vt, link = standing(V10Core())
+    assert link.send_command(Command(0, math.radians(3), math.radians(22), 41, now=True)) is None
+    assert wait(lambda: link.stats.device_v1_0, 10.0)
+    assert link.stats.starts_unanswered == 1 and link.last_telemetry.q == 0
+    assert link.send_command(Command(0, 0.05, 0.3, 42, now=True)).code == RefusalCode.NO_START
+    assert link.send_command(Command(1, 0.05, 0.3, 43)) is None      # COMMANDs still go
+    assert vt.fw.core.decoder.stats.type_errors == 1 and vt.fw.hv_enabled

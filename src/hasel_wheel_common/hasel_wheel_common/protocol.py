@@ -1,4 +1,4 @@
-"""Codec of the wheel's serial protocol (``docs/protocol.md``): pure, no I/O, no ROS.
+"""Codec of the wheel's serial protocol, version 1.1 (``docs/protocol.md``): pure, no I/O, no ROS.
 
 Frames are ``COBS(version, type, counter, payload, crc16) + 0x00``.  :class:`FrameDecoder`
 takes bytes in any chunking, never raises on garbage, resynchronises at the next delimiter and
@@ -14,7 +14,7 @@ from typing import NamedTuple, Union
 
 from cobs import cobs
 
-VERSION = 1
+VERSION = 1                  # the version byte of every frame; v1.1 adds START, not a byte
 MAX_RAW = 64                 # raw frame bytes (header + payload + crc)
 MAX_STUFFED = MAX_RAW + 2    # COBS adds at most one byte per 254, plus one
 SECTOR = math.pi / 8.0
@@ -23,11 +23,12 @@ ANGLE_TOLERANCE = 1e-6       # slack on +-pi/8 [rad]: float32(pi/8) exceeds pi/8
 # message types
 TELEMETRY, ACK, REJECT = 0x01, 0x02, 0x03
 COMMAND, HEARTBEAT, HV, ESTOP, CONFIG, CLEAR_ESTOP = 0x10, 0x11, 0x12, 0x13, 0x14, 0x15
+START = 0x16                 # v1.1; a v1.0 device drops it as an unknown type, unanswered
 
 # REJECT reasons
 R_N_A, R_ANGLE, R_ORDER, R_HV_DISABLED, R_ESTOP, R_CONFIG = 1, 2, 3, 4, 5, 6
-#: v1.1 START reasons: the pad is not in contact within [phi_a, phi_d); an actuator is on.
-R_NOT_IN_CONTACT, R_ACTUATOR_ON = 7, 8
+R_NOT_IN_CONTACT = 7         # v1.1 START: pad n_a not in contact within [phi_a, phi_d), or position lost
+R_ACTUATOR_ON = 8            # v1.1 START: an actuator is on (q = 1)
 
 # fault flags (as in WheelTelemetry.msg)
 F_WATCHDOG, F_HV_MONITOR, F_OVERCURRENT, F_MAX_ON, F_ENCODER, F_REJECTED, F_ESTOP = \
@@ -69,6 +70,16 @@ class Command(NamedTuple):
     phi_d: float
 
 
+class Start(NamedTuple):
+    """v1.1 START: switch pad n_a on now if its contact angle lies in [phi_a, phi_d) [rad]
+    (protocol rule 8); the payload is COMMAND's."""
+
+    command_seq: int
+    n_a: int
+    phi_a: float
+    phi_d: float
+
+
 class Heartbeat(NamedTuple):
     host_time_us: int
 
@@ -92,7 +103,7 @@ class ClearEstop(NamedTuple):
     pass
 
 
-Message = Union[Telemetry, Ack, Reject, Command, Heartbeat, Hv, Estop, Config, ClearEstop]
+Message = Union[Telemetry, Ack, Reject, Command, Start, Heartbeat, Hv, Estop, Config, ClearEstop]
 
 #: type -> (struct format of the payload, message class)
 LAYOUT: dict[int, tuple[struct.Struct, type]] = {
@@ -105,6 +116,7 @@ LAYOUT: dict[int, tuple[struct.Struct, type]] = {
     ESTOP: (struct.Struct("<"), Estop),
     CONFIG: (struct.Struct("<HHHB"), Config),
     CLEAR_ESTOP: (struct.Struct("<"), ClearEstop),
+    START: (struct.Struct("<IBff"), Start),
 }
 TYPE_OF = {cls: t for t, (_, cls) in LAYOUT.items()}
 _HEADER = struct.Struct("<BBH")
@@ -233,7 +245,8 @@ class FrameDecoder:
 
 
 def check_command(n_a: int, phi_a: float, phi_d: float) -> int:
-    """0 if u = (n_a, phi_a, phi_d) is acceptable, else the REJECT reason (protocol rule 7)."""
+    """0 if u = (n_a, phi_a, phi_d) is acceptable, else the REJECT reason (protocol rule 7);
+    the value check of COMMAND and START alike."""
     if not 0 <= n_a <= 15:
         return R_N_A
     for v in (phi_a, phi_d):

@@ -36,7 +36,7 @@ def test_valid_vectors_round_trip(v):
 @pytest.mark.parametrize("v", VECTORS["invalid"], ids=lambda v: v["name"])
 def test_invalid_vectors_are_dropped_and_counted(v):
     d = P.FrameDecoder()
-    good = VECTORS["valid"][7]["wire_hex"]
+    good = next(v["wire_hex"] for v in VECTORS["valid"] if v["name"] == "HV on")
     frames = d.feed(bytes.fromhex(v["wire_hex"] + good))
     assert len(frames) == 1 and frames[0].message == P.Hv(1)      # resynchronised
     assert getattr(d.stats, v["counts"]) == 1 and d.stats.dropped == 1
@@ -45,8 +45,17 @@ def test_invalid_vectors_are_dropped_and_counted(v):
 def test_layout_sizes_are_the_specs():
     sizes = {t: fmt.size for t, (fmt, _) in P.LAYOUT.items()}
     assert sizes == {P.TELEMETRY: 42, P.ACK: 7, P.REJECT: 8, P.COMMAND: 13, P.HEARTBEAT: 8,
-                     P.HV: 1, P.ESTOP: 0, P.CONFIG: 7, P.CLEAR_ESTOP: 0}
+                     P.HV: 1, P.ESTOP: 0, P.CONFIG: 7, P.CLEAR_ESTOP: 0, P.START: 13}
     assert max(4 + s + 2 for s in sizes.values()) <= P.MAX_RAW
+
+
+def test_v1_1_adds_start_with_the_payload_of_command_and_two_reject_reasons():
+    # docs/protocol.md "Changes from 1.0": the version byte stays 1
+    assert (P.VERSION, P.START, P.R_NOT_IN_CONTACT, P.R_ACTUATOR_ON) == (1, 0x16, 7, 8)
+    assert P.LAYOUT[P.START][0].format == P.LAYOUT[P.COMMAND][0].format
+    start, command = (P.encode(cls(19, 5, 0.05, 0.38), 43) for cls in (P.Start, P.Command))
+    assert cobs.decode(start[:-1])[1] == P.START
+    assert cobs.decode(start[:-1])[4:-2] == cobs.decode(command[:-1])[4:-2]
 
 
 def test_values_that_do_not_fit_are_a_clear_error():
@@ -74,6 +83,8 @@ messages = st.one_of(
     st.builds(P.Hv, st.integers(0, 1)),
     st.builds(P.Heartbeat, st.integers(0, 2**64 - 1)),
     st.builds(P.Command, st.integers(0, 2**32 - 1), st.integers(0, 15),
+              st.floats(-0.375, 0.375, width=32), st.floats(-0.375, 0.375, width=32)),
+    st.builds(P.Start, st.integers(0, 2**32 - 1), st.integers(0, 15),
               st.floats(-0.375, 0.375, width=32), st.floats(-0.375, 0.375, width=32)),
     st.builds(P.Telemetry, st.integers(0, 2**64 - 1), st.integers(0, 2**32 - 1),
               st.integers(0, 1023), st.integers(-2**31, 2**31 - 1), st.integers(0, 1),

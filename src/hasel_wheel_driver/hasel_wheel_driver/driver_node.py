@@ -1,9 +1,10 @@
-"""driver_node: the wheel's Teensy (USB serial, protocol v1) as ROS 2 topics.
+"""driver_node: the wheel's Teensy (USB serial, protocol v1.1) as ROS 2 topics.
 
 Publishes ``telemetry``, ``joint_states`` and ``/diagnostics``; forwards ``command`` after
-validating it.  Serial I/O runs in the driver core's own thread, so the executor never waits
-on the port.  HV: off until ``hv_enabled`` is set true; off again on shutdown (SIGINT/SIGTERM),
-on a stale or lost link, and whenever the device's watchdog trips.  The serial link opens
+validating it, as a START when its ``now`` is true.  Serial I/O runs in the driver core's own
+thread, so the executor never waits on the port.  HV: off until ``hv_enabled`` is set true;
+off again on shutdown (SIGINT/SIGTERM), on a stale or lost link, whenever the device's
+watchdog trips, and on ``hv_request`` false (the MPC gave up a stalled wheel).  The serial link opens
 once ``telemetry_subscribers`` subscriptions match ``telemetry`` (or after
 ``subscriber_timeout``), so the recorder gets the first sample too
 (:mod:`hasel_wheel_driver.link_start`).
@@ -19,6 +20,7 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
@@ -75,6 +77,8 @@ class DriverNode(Node):
         self.pub_tlm, self.pub_js, self.pub_diag = pubs.values()
         self.create_subscription(ActuationCommand, topics.COMMAND.name, self._on_command,
                                  qos_profile(topics.COMMAND.qos))
+        self.create_subscription(Bool, topics.HV_REQUEST.name, self._on_hv_request,
+                                 qos_profile(topics.HV_REQUEST.qos))
         self.core = DriverCore(LinkConfig(port, heartbeat_period=hb, link_timeout=timeout),
                                on_sample=self._on_sample, on_event=self._on_event)
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -125,12 +129,24 @@ class DriverNode(Node):
         self.pub_js.publish(fill(JointState(), samples.joint_state_msg(host)))
 
     def _on_event(self, event: str) -> None:
-        self.get_logger().warn(f"link: {event}") if "lost" in event or "stale" in event \
-            else self.get_logger().info(f"link: {event}")
+        if any(w in event for w in ("lost", "stale", "v1.0")):
+            self.get_logger().warn(f"link: {event}")
+        else:
+            self.get_logger().info(f"link: {event}")
+
+    def _on_hv_request(self, msg: Bool) -> None:
+        """``hv_request`` false (the MPC gave up a stalled wheel): HV off, as ``hv_enabled``
+        false does.  True is ignored: HV comes on only by ``hv_enabled``."""
+        if msg.data or not self.get_parameter("hv_enabled").value:
+            return
+        self.get_logger().error("hv_request false (the controller gave up a stalled wheel): "
+                                "HV off; set hv_enabled true to try again")
+        self.set_parameters([Parameter("hv_enabled", Parameter.Type.BOOL, False)])
 
     def _on_command(self, msg: ActuationCommand) -> None:
         why = self.core.send_command(samples.Command(int(msg.n_a), float(msg.phi_a),
-                                                     float(msg.phi_d), int(msg.sequence)))
+                                                     float(msg.phi_d), int(msg.sequence),
+                                                     now=bool(msg.now)))
         if why:
             self.commands_refused += 1
             self.get_logger().warn(f"command {msg.sequence} not sent, HV stays off for it: {why}")

@@ -1,10 +1,11 @@
-"""The host end of the serial link (protocol v1), without ROS.
+"""The host end of the serial link (protocol v1.1), without ROS.
 
 :class:`DriverCore` owns the port and a reader thread, so nothing ever blocks a ROS executor.
 The thread decodes frames as they arrive and hands each telemetry sample to a callback.  It
 sends heartbeats and reconnects with backoff when the device disappears.  HV is switched off
 whenever there is doubt: on a stale or lost link it sends ESTOP and then HV(0), and
-:meth:`shutdown` does the same, ending on HV(0).
+:meth:`shutdown` does the same, ending on HV(0).  A START (a :class:`Command` with ``now``)
+that the device leaves unanswered marks it as v1.0, which has no START (protocol section 5).
 """
 from __future__ import annotations
 
@@ -23,13 +24,14 @@ from hasel_wheel_common.samples import Command, TelemetrySample, from_device
 
 class RefusalCode(IntEnum):
     """Why :meth:`DriverCore.send_command` sent nothing: the protocol's reject reasons for a
-    command that breaks its ranges, and two of the host's own."""
+    command that breaks its ranges, and three of the host's own."""
 
     N_A = P.R_N_A              # n_a outside 0..15
     ANGLE = P.R_ANGLE          # an angle not finite or outside [-pi/8, pi/8]
     ORDER = P.R_ORDER          # not phi_a < phi_d on one side of 0
     NO_LINK = 100              # no port open
     CLOSING = 101              # shutdown has begun: ESTOP and HV(0) are the last frames
+    NO_START = 102             # a START to a v1.0 device, which left an earlier START unanswered
 
 
 class Refusal(str):
@@ -62,7 +64,10 @@ class LinkStats:
     connects: int = 0
     disconnects: int = 0
     stale_events: int = 0
-    commands_sent: int = 0
+    commands_sent: int = 0        # COMMAND and START frames
+    starts_sent: int = 0
+    starts_unanswered: int = 0    # STARTs with neither ACK nor REJECT within ack_timeout
+    device_v1_0: bool = False     # this connection's device has no START (protocol 1.0)
     commands_rejected_locally: int = 0
     rejects: int = 0
     write_errors: int = 0
@@ -96,6 +101,7 @@ class DriverCore:
         self._write_lock = threading.Lock()
         self._acks: dict[int, P.Message] = {}
         self._ack_cv = threading.Condition()
+        self._starts: dict[int, float] = {}     # counter of a START awaiting its answer -> sent [s]
         self._running = False
         self._closing = False
         self.reader_failed: str | None = None   # set if the link thread died of an error
@@ -133,7 +139,10 @@ class DriverCore:
             time.sleep(self.config.heartbeat_period)
 
     def send_command(self, cmd: Command) -> Refusal | None:
-        """Validate and send u; return why it was refused (nothing sent), or None."""
+        """Validate and send u as COMMAND, or as START when ``cmd.now`` (protocol rule 8);
+        return why it was refused (nothing sent), or None.  Both are checked as in rule 7; a
+        START is refused with :attr:`RefusalCode.NO_START` once the device has shown it is
+        v1.0 (:meth:`_check_starts`).  ``test_link_core.py`` holds it."""
         reason = P.check_command(cmd.n_a, cmd.phi_a, cmd.phi_d)
         if reason:
             self.stats.commands_rejected_locally += 1
@@ -145,10 +154,21 @@ class DriverCore:
             return Refusal(why[reason], RefusalCode(reason))
         if not self.connected:
             return Refusal("no link to the wheel", RefusalCode.NO_LINK)
+        if cmd.now and self.stats.device_v1_0:
+            self.stats.commands_rejected_locally += 1
+            return Refusal("the device speaks protocol v1.0, which has no START: send the "
+                           "command with now = false (it switches on when the pad reaches "
+                           "phi_a)", RefusalCode.NO_START)
         seq = cmd.sequence or self._next_seq()
-        if self._write(P.Command(seq, cmd.n_a, cmd.phi_a, cmd.phi_d)) is None:
+        counter = self._write((P.Start if cmd.now else P.Command)(seq, cmd.n_a, cmd.phi_a,
+                                                                   cmd.phi_d))
+        if counter is not None and cmd.now:
+            with self._ack_cv:      # its answer may already be in _acks: looked up when due
+                self._starts[counter] = self.clock()
+        if counter is None:
             return Refusal("shutting down: no command after ESTOP / HV off", RefusalCode.CLOSING)
         self.stats.commands_sent += 1
+        self.stats.starts_sent += int(cmd.now)
         return None
 
     def set_hv(self, enable: bool) -> int | None:
@@ -213,11 +233,36 @@ class DriverCore:
                 "framing_errors": str(d.framing_errors + d.oversize + d.length_errors),
                 "sequence_gaps": str(d.sequence_gaps), "reconnects": str(self.stats.connects),
                 "device_rejects": str(self.stats.rejects),
+                "device_protocol": "1.0 (no START)" if self.stats.device_v1_0 else "1.1",
+                "starts_unanswered": str(self.stats.starts_unanswered),
                 "watchdog_trips": str(self.stats.watchdog_trips),
                 "callback_errors": str(self.stats.callback_errors),
                 "latency_p99_ms": f"{p99 * 1e3:.3f}"}
 
     # -- internals ---------------------------------------------------------------------------
+    def _check_starts(self, now: float) -> None:
+        """Protocol section 5: a START with neither ACK nor REJECT ``ack_timeout`` seconds
+        after it was sent, while the link is up, marks the device as v1.0 (it dropped the
+        frame as an unknown type): counted in ``stats.starts_unanswered``, warned once, and
+        later STARTs are refused until the next connect.  On a stale or lost link nothing
+        is concluded."""
+        with self._ack_cv:
+            due = [c for c, t in self._starts.items() if now - t >= self.config.ack_timeout]
+            unanswered = 0
+            for c in due:
+                del self._starts[c]
+                m = self._acks.get(c)
+                answered = (isinstance(m, P.Ack) and m.acked_type == P.START) or \
+                    (isinstance(m, P.Reject) and m.rejected_type == P.START)
+                unanswered += not answered
+        if not unanswered or not self.connected or self.stale:
+            return
+        self.stats.starts_unanswered += unanswered
+        if not self.stats.device_v1_0:
+            self.stats.device_v1_0 = True
+            self.on_event(f"device answered no START within {self.config.ack_timeout * 1e3:.0f} "
+                          f"ms: it speaks protocol v1.0; STARTs are refused until it reconnects")
+
     def _next_seq(self) -> int:
         self._cmd_seq += 1
         return self._cmd_seq
@@ -252,6 +297,10 @@ class DriverCore:
             return False
         with self._write_lock:
             self._counter = 0          # protocol 6: our first frame after (re)connect is 1
+        with self._ack_cv:             # counters restart: earlier answers name other frames
+            self._acks.clear()
+            self._starts.clear()
+        self.stats.device_v1_0 = False  # the device may have been reflashed meanwhile
         self._ser = ser
         self.decoder = P.FrameDecoder()
         self.connected = True
@@ -321,6 +370,8 @@ class DriverCore:
                 self._handle(data, self.clock())
             now = self.clock()
             self._loop_t = now
+            if self._starts:
+                self._check_starts(now)
             if not self.stale and now - self._last_rx > self.config.link_timeout:
                 self.stale = True
                 self.stats.stale_events += 1

@@ -1,6 +1,7 @@
 """The driver core refuses bad commands locally and survives a failing consumer."""
 import math
 import os
+import struct
 import tty
 
 import pytest
@@ -126,3 +127,89 @@ def test_a_device_restart_is_not_counted_as_lost_frames():
     d = P.FrameDecoder()
     d.feed(b"".join(P.encode(P.Hv(0), c) for c in (500, 501, 1, 2)))
     assert d.stats.sequence_gaps == 0 and d.stats.restarts == 1
+
+
+# -- START (protocol v1.1): sent for Command(now=True); a v1.0 device answers none -------------
+
+@pytest.mark.parametrize("cmd, code", [
+    (Command(16, 0.05, 0.3, now=True), RefusalCode.N_A),
+    (Command(3, math.nan, 0.3, now=True), RefusalCode.ANGLE),
+    (Command(3, -0.1, 0.1, now=True), RefusalCode.ORDER),
+])
+def test_a_bad_start_is_refused_before_the_wire_as_a_command_is(cmd, code):
+    core = DriverCore(LinkConfig("/nonexistent"))
+    assert core.send_command(cmd).code == code
+    assert core.stats.commands_sent == core.stats.starts_sent == 0
+
+
+class Clock:
+    """A clock the test moves [s]."""
+
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+@pytest.fixture
+def linked():
+    """A connected link on a pty with a test clock: (master fd, core, clock, events)."""
+    master, slave, core = _pty_core()
+    events = []
+    core.on_event, core.clock = events.append, Clock()
+    core._open()
+    _read_all(master)                                   # HV(0) of the connect
+    yield master, core, core.clock, events
+    core._close()
+    os.close(master)
+    os.close(slave)
+
+
+def test_a_now_command_goes_out_as_a_start_and_an_answered_start_keeps_it_on(linked):
+    master, core, clock, events = linked
+    assert core.send_command(Command(3, 0.05, 0.3, 7, now=True)) is None
+    assert core.send_command(Command(4, 0.05, 0.3, 8)) is None
+    frames = P.FrameDecoder().feed(_read_all(master))
+    f32 = [struct.unpack("<f", struct.pack("<f", v))[0] for v in (0.05, 0.3)]
+    assert [(f.type, f.message) for f in frames] == [(P.START, P.Start(7, 3, *f32)),
+                                                     (P.COMMAND, P.Command(8, 4, *f32))]
+    assert (core.stats.commands_sent, core.stats.starts_sent) == (2, 1)
+    # a v1.1 device answers (here: REJECT, the pad not in contact); nothing is concluded
+    core._handle(P.encode(P.Reject(P.START, frames[0].counter, 7, P.R_NOT_IN_CONTACT), 1), 0.0)
+    clock.t += 1.0
+    core._check_starts(clock())
+    assert not core.stats.device_v1_0 and core.stats.starts_unanswered == 0
+    assert core.send_command(Command(3, 0.05, 0.3, 9, now=True)) is None
+
+
+def test_an_unanswered_start_marks_the_device_v1_0_and_later_starts_are_refused(linked):
+    master, core, clock, events = linked
+    assert core.send_command(Command(3, 0.05, 0.3, 7, now=True)) is None
+    # a v1.0 device answers the heartbeat after it, not the START
+    core._handle(P.encode(P.Ack(P.HEARTBEAT, 2, 0), 1), 0.0)
+    clock.t += 0.099
+    core._check_starts(clock())
+    assert not core.stats.device_v1_0                   # not yet: within ack_timeout
+    clock.t += 0.002
+    core._check_starts(clock())
+    assert core.stats.device_v1_0 and core.stats.starts_unanswered == 1
+    assert sum("v1.0" in e for e in events) == 1
+    assert core.diagnostics()["device_protocol"].startswith("1.0")
+    _read_all(master)
+    refusal = core.send_command(Command(3, 0.05, 0.3, 8, now=True))
+    assert refusal.code == RefusalCode.NO_START and core.stats.commands_rejected_locally == 1
+    assert core.send_command(Command(3, 0.05, 0.3, 9)) is None    # COMMANDs still go
+    assert [f.type for f in P.FrameDecoder().feed(_read_all(master))] == [P.COMMAND]
+    core._close()
+    core._open()                                        # a new connection may be a new device
+    assert not core.stats.device_v1_0
+
+
+def test_an_unanswered_start_on_a_stale_link_concludes_nothing(linked):
+    master, core, clock, events = linked
+    assert core.send_command(Command(3, 0.05, 0.3, 7, now=True)) is None
+    core.stale = True
+    clock.t += 1.0
+    core._check_starts(clock())
+    assert not core.stats.device_v1_0 and core.stats.starts_unanswered == 0 and not core._starts

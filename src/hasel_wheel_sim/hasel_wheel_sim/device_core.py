@@ -1,4 +1,4 @@
-"""The device rules of protocol v1 section 4, decided on the device's own readings: what the
+"""The device rules of protocol v1.1 section 4, decided on the device's own readings: what the
 wheel's Teensy does on every tick, in Python.
 
 This is the reference the C++ firmware core (``firmware/core``) is held to, tick for tick and
@@ -36,7 +36,7 @@ MAX_STEP_COUNTS = 64
 LOST_AFTER = 10
 #: Host bytes the device buffers between two ticks [bytes].
 RX_BUFFER = 512
-HOST_TYPES = frozenset({P.COMMAND, P.HEARTBEAT, P.HV, P.ESTOP, P.CONFIG, P.CLEAR_ESTOP})
+HOST_TYPES = frozenset({P.COMMAND, P.HEARTBEAT, P.HV, P.ESTOP, P.CONFIG, P.CLEAR_ESTOP, P.START})
 
 
 class Sensors(NamedTuple):
@@ -66,8 +66,10 @@ class Latched:
     phi_a: float = 0.0             # [rad], binary32 as received
     phi_d: float = 0.0
     sector: int = 0                # unwrapped sector N of the target pad
-    on_count: int = 0              # switch on when the unwrapped count reaches this
+    on_count: int = 0              # switch on when the unwrapped count reaches this (a START:
+                                   # the count it switched on at)
     off_count: int = 0             # switch off when it reaches this
+    now: bool = False              # a START latched it (rule 8), switching the pad on at once
 
 
 @dataclass
@@ -98,6 +100,17 @@ def angle_counts(phi: float) -> int:
     sector either way (section 6)."""
     c = math.ceil(float(np.float32(phi) * COUNTS_PER_RAD))
     return max(-COUNTS_PER_SECTOR, min(COUNTS_PER_SECTOR, c))
+
+
+def start_sector(n_a: int, phi_a: float, phi_d: float, c: int) -> int | None:
+    """Rule 8 in counts (section 6): the unwrapped sector N = n_a (mod 16) with
+    64 N + a(phi_a) <= c < 64 N + a(phi_d), c the unwrapped count and phi [rad]; None when
+    pad n_a is not in contact within [phi_a, phi_d).  The window is at most 64 counts wide,
+    so only the largest N = n_a (mod 16) with 64 N + a(phi_a) <= c can fit.
+    ``test_device_rules.py::test_a_start_*`` holds it."""
+    top = (c - angle_counts(phi_a)) // COUNTS_PER_SECTOR
+    n = top - (top - n_a) % PADS
+    return n if c < n * COUNTS_PER_SECTOR + angle_counts(phi_d) else None
 
 
 class EncoderTrack:
@@ -148,6 +161,7 @@ class DeviceCore:
         self._rx = bytearray()
         self._now = 0
         self._tx: list[bytes] = []
+        self._started = False          # a START switched a pad on at this tick
 
     def state(self) -> DeviceState:
         """A copy of the device state."""
@@ -167,6 +181,7 @@ class DeviceCore:
         frames sent, in order, and the outputs to apply."""
         self._now = now_us
         self._tx = []
+        self._started = False
         for frame in self.decoder.feed(bytes(self._rx)):
             if frame.type in HOST_TYPES:
                 self._handle(frame)
@@ -210,15 +225,18 @@ class DeviceCore:
         s = self.s
         s.last_host_us = self._now
         m = frame.message
-        seq = m.command_seq if frame.type == P.COMMAND else 0
+        seq = m.command_seq if frame.type in (P.COMMAND, P.START) else 0
         reason = 0
-        if frame.type == P.COMMAND:
+        if frame.type in (P.COMMAND, P.START):
             reason = P.check_command(m.n_a, m.phi_a, m.phi_d) or \
                 (P.R_ESTOP if s.estop else 0) or (0 if s.hv_enabled else P.R_HV_DISABLED)
+            if not reason and frame.type == P.START:
+                reason = self._start(m)
+            elif not reason:
+                s.pending = Latched(True, m.command_seq, m.n_a, m.phi_a, m.phi_d)
             if reason:
                 s.faults |= P.F_REJECTED
             else:
-                s.pending = Latched(True, m.command_seq, m.n_a, m.phi_a, m.phi_d)
                 s.faults &= ~(P.F_REJECTED | P.F_MAX_ON)
         elif frame.type == P.HV:
             if m.enable > 1:
@@ -247,6 +265,28 @@ class DeviceCore:
             self._send(P.Reject(frame.type, frame.counter, seq, reason))
         else:
             self._send(P.Ack(frame.type, frame.counter, seq))
+
+    def _start(self, m: P.Start) -> int:
+        """Rule 8 past the checks it shares with COMMAND: 0 when pad n_a switched on now (the
+        pending command cleared, the START latched in its sector), else the REJECT reason:
+        R_ACTUATOR_ON while q = 1, R_NOT_IN_CONTACT while the position is lost or the pad's
+        contact angle on the last taken count is outside [phi_a, phi_d)."""
+        s, enc = self.s, self.encoder
+        if s.q:
+            return P.R_ACTUATOR_ON
+        n = start_sector(m.n_a, m.phi_a, m.phi_d, enc.unwrapped) \
+            if enc.started and enc.bad_run < LOST_AFTER else None
+        if n is None:
+            return P.R_NOT_IN_CONTACT
+        s.pending.valid = False
+        s.target = Latched(True, m.command_seq, m.n_a, m.phi_a, m.phi_d, n, enc.unwrapped,
+                           n * COUNTS_PER_SECTOR + angle_counts(m.phi_d), True)
+        s.eta_unwrapped = n
+        s.last_command_seq = m.command_seq
+        s.q = True
+        s.on_since_us = self._now
+        self._started = True
+        return 0
 
     # -- rules 3-6 ------------------------------------------------------------------------
     def _pads_off(self) -> None:
@@ -290,6 +330,8 @@ class DeviceCore:
 
     def _switching(self, now_us: int, c: int) -> None:
         s = self.s
+        if self._started:                            # a START was this tick's one switch
+            return
         if s.q:
             if c >= s.target.off_count:              # switch off; latch what is pending
                 s.q = False

@@ -124,7 +124,7 @@ class _Outputs(C.Structure):
                 ("telemetry_rate_hz", C.c_uint16), ("dropped", C.c_uint32)]
 
 
-_LATCHED = ("valid", "seq", "n_a", "phi_a", "phi_d", "sector", "on_count", "off_count")
+_LATCHED = ("valid", "seq", "n_a", "phi_a", "phi_d", "sector", "on_count", "off_count", "now")
 
 
 class _Latched(C.Structure):
@@ -243,7 +243,7 @@ class CppDeviceCore:
 
         def latched(x: _Latched) -> Latched:
             return Latched(bool(x.valid), x.seq, x.n_a, x.phi_a, x.phi_d, x.sector, x.on_count,
-                           x.off_count)
+                           x.off_count, bool(x.now))
         return DeviceState(bool(st.hv_enabled), bool(st.estop), st.faults, st.counter,
                            st.sample_seq, st.last_host_us, st.hv_on_since_us, st.on_since_us,
                            bool(st.q), st.eta_unwrapped, st.last_command_seq,

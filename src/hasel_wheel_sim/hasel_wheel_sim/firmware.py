@@ -10,12 +10,23 @@ as the Teensy does.  :mod:`.pty_device` serves a board on a pseudo-terminal;
 """
 from __future__ import annotations
 
+import math
 from typing import Protocol
 
 from hasel_wheel_common import protocol as P
 
-from hasel_wheel_sim.device_core import DeviceCore, DeviceState, Outputs, Sensors
+from hasel_wheel_sim.device_core import (COUNTS_PER_SECTOR, ENCODER_COUNTS, DeviceCore,
+                                         DeviceState, Latched, Outputs, Sensors)
 from hasel_wheel_sim.plant import ACTUATOR_CURRENT_A, HV_SUPPLY_V, Plant
+
+
+def rise_angle(target: Latched) -> float:
+    """The contact angle [rad] at which the model's force law rises for the pad the device
+    switched on: a COMMAND's phi_a; for a START (protocol rule 8) the pad's contact angle on
+    the reading it switched on at, c * 2 pi / 1024 - N * pi / 8.  ``test_firmware.py`` holds it."""
+    if not target.now:
+        return target.phi_a
+    return (target.on_count - COUNTS_PER_SECTOR * target.sector) * 2.0 * math.pi / ENCODER_COUNTS
 
 
 class Core(Protocol):
@@ -85,7 +96,7 @@ class Firmware:
             self.hv_off_t = self.plant.t
         wheel = self.plant.wheel
         if out.active_mask:
-            wheel.drive(st.eta_unwrapped, st.target.phi_a, st.target.seq)
+            wheel.drive(st.eta_unwrapped, rise_angle(st.target), st.target.seq)
         else:
             wheel.drive(None)
         self.plant.step(None, self.tick_period)

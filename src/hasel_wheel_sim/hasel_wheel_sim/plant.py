@@ -16,6 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from hasel_wheel_common import protocol as P
 from hasel_wheel_common.samples import ENCODER_COUNT, ENCODER_COUNTS, Command, TelemetrySample
 
 from hasel_wheel_sim import layout as L
@@ -28,8 +29,6 @@ from hasel_wheel_sim.wheel import TICK, HybridWheel, SwitchMode
 COUNT = ENCODER_COUNT  # one encoder count [rad]
 HV_SUPPLY_V = 9000.0                    # HV converter output while HV is enabled [V]
 ACTUATOR_CURRENT_A = 3e-4               # supply current while an actuator charges [A]
-FAULT_REJECTED = 32                     # fault bit: a command was rejected (docs/protocol.md)
-FAULT_MAX_ON_TIME = 8                   # fault bit: a pad reached the maximum on-time
 MAX_ON_TIME = 2.0                       # the device's default maximum on-time [s] (rule 5)
 
 
@@ -222,7 +221,7 @@ class Plant:
         self.last_events = self.wheel.advance(dt)
         if self.wheel.s[L.S_Q] and self.wheel.s[L.S_ON_TIME] >= MAX_ON_TIME - 1e-9:
             self.wheel.cut_hv()                  # protocol rule 5, as the firmware does
-            self._faults |= FAULT_MAX_ON_TIME
+            self._faults |= P.F_MAX_ON
         sample = self._sample()
         if self._tlm_delay == 0.0:
             return sample
@@ -240,7 +239,7 @@ class Plant:
             self.wheel.command(c.n_a, c.phi_a, c.phi_d, c.sequence)
         elif self.wheel.start_now(c.n_a, c.phi_a, c.phi_d, c.sequence):
             self.starts_refused += 1
-            self._faults |= FAULT_REJECTED
+            self._faults |= P.F_REJECTED
 
     def _sample(self) -> TelemetrySample | None:
         """What the firmware measures at this tick (None if the sample gets lost)."""

@@ -24,6 +24,7 @@ from hasel_wheel_msgs.msg import ActuationCommand, HybridStateEstimate, WheelTel
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
 
 from hasel_wheel_common import samples
 from hasel_wheel_common import topics
@@ -80,6 +81,8 @@ class SimNode(Node):
         self.pub_tlm, self.pub_js, self.pub_truth, self.pub_diag = pubs.values()
         self.sub_cmd = self.create_subscription(ActuationCommand, topics.COMMAND.name,
                                                 self._on_command, qos_profile(topics.COMMAND.qos))
+        self.create_subscription(Bool, topics.HV_REQUEST.name, self._on_hv_request,
+                                 qos_profile(topics.HV_REQUEST.qos))
         self.t0_ns = self.get_clock().now().nanoseconds
         self.started = False
         self.created = time.monotonic()
@@ -100,9 +103,18 @@ class SimNode(Node):
                     return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
+    def _on_hv_request(self, msg: Bool) -> None:
+        """``hv_request``: false switches HV off (every pad off, commands refused), true on
+        again (:meth:`SimRuntime.set_hv`)."""
+        if bool(msg.data) != self.core.hv_enabled:
+            self.core.set_hv(bool(msg.data))
+            log = self.get_logger().info if msg.data else self.get_logger().warn
+            log(f"HV {'on' if msg.data else 'off'} on request (hv_request)")
+
     def _on_command(self, msg: ActuationCommand) -> None:
         reason = self.core.submit(samples.Command(int(msg.n_a), float(msg.phi_a),
-                                                  float(msg.phi_d), int(msg.sequence)))
+                                                  float(msg.phi_d), int(msg.sequence),
+                                                  now=bool(msg.now)))
         if reason:
             self.get_logger().warn(f"command {msg.sequence} rejected, HV stays off for it: {reason}")
 

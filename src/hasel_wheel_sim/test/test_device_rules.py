@@ -1,4 +1,4 @@
-"""The device rules of protocol v1 (docs/protocol.md sections 4 and 6), each held on both
+"""The device rules of protocol v1.1 (docs/protocol.md sections 4 and 6), each held on both
 device cores: the Python reference and the C++ firmware core built for the host.
 
 The wheel is a sequence of encoder readings; the board's monitors read what the device
@@ -7,7 +7,9 @@ safety rules here are the ones ``test_firmware_mutants.py`` removes from the C++
 a time, to show that each test fails without its rule.
 """
 import math
+from dataclasses import replace
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
@@ -260,6 +262,166 @@ def test_a_rejected_configuration_changes_nothing(bench, cfg):
     assert i == 29                                       # the 30th tick: 100 ms
 
 
+# -- START: the pad in contact on now (rule 8, v1.1) ----------------------------------------
+
+def unchanged(before, after):
+    """True when a device state changed in nothing but what every handled frame and tick
+    changes (frame counter, sample_seq, watchdog time) and fault bit 32."""
+    keep = dict(counter=0, sample_seq=0, last_host_us=0)
+    return (replace(before, faults=before.faults & ~P.F_REJECTED, **keep)
+            == replace(after, faults=after.faults & ~P.F_REJECTED, **keep))
+
+
+def standing_at(bench, count):
+    """HV enabled, the wheel rolled from count 0 to unwrapped ``count`` (at most 32 counts a
+    tick) and standing there."""
+    enable(bench)
+    tel = None
+    for i in range(count // 32 + 1):
+        if i % 10 == 0:
+            bench.send(P.Heartbeat(0))
+        _, tel, _ = bench.tick(min(32, count - 32 * i))
+    assert tel.encoder_unwrapped == count and tel.q == 0
+
+
+def test_a_start_switches_the_pad_in_contact_on_at_once_and_off_at_phi_d(bench):
+    # count 10: pad 0's contact angle, 10 counts, lies in [3 deg, 22 deg) = [9, 63) counts
+    standing_at(bench, 10)
+    bench.send(P.Command(4, 2, D(3), D(22)))            # pending, cleared by the START
+    c = bench.send(P.Start(5, 0, D(3), D(22)))
+    replies, tel, out = bench.tick()
+    assert replies[-1] == P.Ack(P.START, c, 5)
+    assert (tel.q, tel.eta, tel.eta_unwrapped, out.active_mask, tel.last_command_seq) == \
+        (1, 0, 0, 1 << 0, 5)
+    st = bench.core.state()
+    assert not st.pending.valid and st.target.now and st.on_since_us == round((bench.k - 1) * TICK_US)
+    rows = switch_ticks(bench, 200)                      # one count per tick, to count 210
+    on = [c for _, c, q, _ in rows if q]
+    assert on == list(range(11, 63))                     # off at 64 * 0 + ceil(22 deg) = 63
+    assert rows[-1][1] > 128 + counts(D(22))             # past pad 2's window: it never came
+
+
+def test_a_start_switch_on_is_the_ticks_one_switch(bench):
+    # the START's tick reads count 70, past phi_d (63): the pad is on at that tick, off at the next
+    standing_at(bench, 60)
+    bench.send(P.Start(5, 0, D(3), D(22)))
+    _, tel, out = bench.tick(10)
+    assert (tel.encoder_unwrapped, tel.q, out.active_mask) == (70, 1, 1)
+    _, tel, out = bench.tick()
+    assert (tel.q, out.active_mask) == (0, 0)
+
+
+@pytest.mark.parametrize("count, n_a, phi_a, phi_d, sector", [
+    (9, 0, D(3), D(22), 0), (62, 0, D(3), D(22), 0),      # the window's ends: [9, 63)
+    (1024 + 10, 0, D(3), D(22), 16),                        # a turn later: N = 16
+    (64 * 5 + 30, 5, D(3), D(22), 5), (0, 0, 0.0, D(22), 0),
+    (128 - 62, 2, D(-22), D(-6), 2), (128 - 18, 2, D(-22), D(-6), 2),   # braking [-62, -17)
+])
+def test_a_start_inside_the_window_is_accepted_in_its_sector(bench, count, n_a, phi_a, phi_d, sector):
+    standing_at(bench, count)
+    c = bench.send(P.Start(9, n_a, phi_a, phi_d))
+    replies, tel, out = bench.tick()
+    assert replies == [P.Ack(P.START, c, 9)]
+    assert (tel.q, tel.eta_unwrapped, out.active_mask) == (1, sector, 1 << n_a)
+    st = bench.core.state()
+    assert st.target.off_count == 64 * sector + counts(float(np.float32(phi_d)))
+
+
+@pytest.mark.parametrize("count, n_a, phi_a, phi_d", [
+    (8, 0, D(3), D(22)), (63, 0, D(3), D(22)),            # just outside [9, 63)
+    (30, 1, D(3), D(22)), (64 + 30, 0, D(3), D(22)),        # another pad in contact
+    (1024 + 30, 15, D(3), D(22)),                            # pad 15's window is [969, 1023)
+    (128 - 63, 2, D(-22), D(-6)), (128 - 17, 2, D(-22), D(-6)),
+])
+def test_a_start_outside_the_window_is_refused_as_not_in_contact(bench, count, n_a, phi_a, phi_d):
+    standing_at(bench, count)
+    before = bench.core.state()
+    c = bench.send(P.Start(9, n_a, phi_a, phi_d))
+    replies, tel, out = bench.tick()
+    assert replies == [P.Reject(P.START, c, 9, P.R_NOT_IN_CONTACT)]
+    assert tel.fault_flags & P.F_REJECTED and (tel.q, out.active_mask) == (0, 0)
+    assert unchanged(before, bench.core.state())
+
+
+def test_a_start_needs_hv_enabled(bench):
+    bench.run(1, raw=10)
+    before = bench.core.state()
+    c = bench.send(P.Start(5, 0, D(3), D(22)))
+    replies, tel, out = bench.tick()
+    assert replies == [P.Reject(P.START, c, 5, P.R_HV_DISABLED)]
+    assert tel.fault_flags & P.F_REJECTED and (tel.q, out.active_mask, out.hv_supply) == (0, 0, False)
+    assert unchanged(before, bench.core.state())
+    enable(bench)                                        # HV on later: the START is not latched
+    _, tel, out = bench.run(20)
+    assert (tel.q, out.active_mask) == (0, 0) and tel.last_command_seq == 0
+
+
+def test_a_start_is_refused_under_estop(bench):
+    standing_at(bench, 10)
+    bench.send(P.Estop())
+    bench.tick()
+    before = bench.core.state()
+    c1, c2 = bench.send(P.Start(5, 0, D(3), D(22))), bench.send(P.Start(6, 16, D(3), D(22)))
+    replies, tel, out = bench.tick()
+    assert replies == [P.Reject(P.START, c1, 5, P.R_ESTOP), P.Reject(P.START, c2, 6, P.R_N_A)]
+    assert (tel.q, out.active_mask, out.hv_supply) == (0, 0, False)
+    assert unchanged(before, bench.core.state())
+
+
+def test_a_start_is_refused_while_an_actuator_is_on(bench):
+    standing_at(bench, 0)
+    bench.send(P.Command(3, 0, D(0), D(22)))             # pad 0 on at this tick's reading
+    _, tel, _ = bench.tick()
+    assert tel.q == 1
+    before = bench.core.state()
+    c = bench.send(P.Start(5, 0, D(0), D(22)))           # pad 0 is in its window
+    replies, tel, out = bench.tick()
+    assert replies == [P.Reject(P.START, c, 5, P.R_ACTUATOR_ON)]
+    assert (tel.q, tel.eta_unwrapped, out.active_mask, tel.last_command_seq) == (1, 0, 1, 3)
+    assert unchanged(before, bench.core.state())
+
+
+def test_a_start_is_refused_while_the_position_is_lost(make_core):
+    b = Bench(make_core())
+    c1, c2 = b.send(P.Hv(1)), b.send(P.Start(5, 0, 0.0, D(22)))   # before the first reading
+    replies, tel, out = b.tick(raw=10)
+    assert replies == [P.Ack(P.HV, c1, 0), P.Reject(P.START, c2, 5, P.R_NOT_IN_CONTACT)]
+    assert (tel.q, out.active_mask) == (0, 0)
+    b.run(10, ok=False, heartbeat_every=1)               # ten bad readings: position lost
+    before = b.core.state()
+    c1, c2 = b.send(P.Hv(1)), b.send(P.Start(6, 0, 0.0, D(22)))
+    replies, tel, out = b.tick(ok=False)
+    assert replies == [P.Ack(P.HV, c1, 0), P.Reject(P.START, c2, 6, P.R_NOT_IN_CONTACT)]
+    assert (tel.q, out.active_mask, out.hv_supply) == (0, 0, False)
+    assert unchanged(replace(before, hv_on_since_us=0), replace(b.core.state(), hv_on_since_us=0))
+
+
+def test_a_started_pad_is_switched_off_by_the_maximum_on_time(bench):
+    standing_at(bench, 10)
+    bench.send(P.Config(300, 1000, 50, 0))               # 50 ms maximum on-time
+    bench.send(P.Start(5, 0, D(3), D(22)))
+    on = [bench.run(1, heartbeat_every=1)[1].q for _ in range(40)]   # the wheel stands still
+    assert sum(on) == 15 and on[:15] == [1] * 15         # 50 ms = 15 ticks of 3.33 ms
+    _, tel, out = bench.tick()
+    assert tel.fault_flags & P.F_MAX_ON and out.active_mask == 0 and out.hv_supply
+    bench.send(P.Start(6, 0, D(3), D(22)))               # still in contact: accepted again
+    _, tel, _ = bench.tick()
+    assert tel.q == 1 and not tel.fault_flags & (P.F_MAX_ON | P.F_REJECTED)
+
+
+def test_a_command_sent_after_a_start_is_latched_at_its_switch_off(bench):
+    standing_at(bench, 10)
+    bench.send(P.Start(5, 0, D(3), D(22)))
+    bench.tick()
+    bench.send(P.Command(6, 1, D(3), D(22)))
+    _, tel, _ = bench.tick()
+    assert (tel.q, tel.last_command_seq) == (1, 5)       # pending behind the START
+    rows = switch_ticks(bench, 150)
+    on = [(c, m) for _, c, q, m in rows if q]
+    assert on[0] == (11, 1 << 0) and (62, 1 << 0) in on and (63, 1 << 0) not in on
+    assert on[on.index((62, 1)) + 1] == (64 + counts(D(3)), 1 << 1)   # pad 1 at its angle
+
+
 # -- the safety interlocks (rules 4-6, section 6) -------------------------------------------
 
 def test_watchdog_cuts_hv_after_100_ms_of_host_silence(bench):
@@ -360,6 +522,9 @@ HOST = st.one_of(
     st.builds(P.Command, st.integers(0, 2**32 - 1), st.integers(0, 17), ANGLE_A, ANGLE_D),
     st.builds(P.Command, st.integers(0, 2**32 - 1), st.integers(0, 15), st.just(0.0),
               st.just(math.pi / 8)),                      # a whole sector: a pad switches
+    st.builds(P.Start, st.integers(0, 2**32 - 1), st.integers(0, 17), ANGLE_A, ANGLE_D),
+    st.builds(P.Start, st.integers(0, 2**32 - 1), st.integers(0, 15), st.just(0.0),
+              st.just(math.pi / 8)),                      # a whole sector: one pad is in it
     st.builds(P.Hv, st.integers(0, 3)), st.just(P.Estop()), st.just(P.ClearEstop()),
     st.builds(P.Config, st.sampled_from([50, 300, 1000, 40]), st.sampled_from([20, 100, 5]),
               st.sampled_from([10, 2000, 5]), st.integers(0, 1)))

@@ -86,3 +86,19 @@ def test_reset_switches_every_pad_off(make_core):
     assert fw.plant.wheel.s[L.S_Q] == 1.0
     fw.reset()
     assert fw.plant.wheel.s[L.S_Q] == 0.0 and not fw.hv_enabled and fw.outputs.active_mask == 0
+
+
+def test_a_start_drives_the_standing_wheel_from_the_contact_angle_it_read(make_core):
+    # pad 0 in contact at 10 deg: a START switches it on, and the model's force law rises from
+    # the contact angle of the reading (firmware.rise_angle), not from phi_a = 3 deg
+    fw = Firmware(Plant(config=PlantConfig(), xi1=D(10), xi2=0.0), make_core())
+    host = Host(fw)
+    host.tick()                                                 # the first reading
+    host.send(P.Hv(1))
+    host.tick()
+    host.send(P.Start(5, 0, D(3), D(22)))
+    tel = host.tick()
+    s = fw.plant.wheel.s
+    assert (tel.q, tel.eta_unwrapped, tel.last_command_seq, int(s[L.S_Q])) == (1, 0, 5, 1)
+    assert s[L.S_PHI_A] == tel.encoder_unwrapped * 2 * math.pi / 1024
+    assert D(10) - 2 * math.pi / 1024 < s[L.S_PHI_A] <= D(10)

@@ -53,6 +53,18 @@ MUTANTS = {
         "rejected_configuration"),
     "a lost position switches HV off": (DEVICE, "if (reading.lost) hv_off();", "",
                                         "lose_the_position"),
+    "a START needs HV enabled": (
+        DEVICE, "if (!reason && !s_.hv_enabled) reason = kReasonHvDisabled;",
+        "if (!reason && !s_.hv_enabled && m.type == kCommand) reason = kReasonHvDisabled;",
+        "start_needs_hv"),
+    "a START only while no actuator is on": (DEVICE, "if (s_.q) return kReasonActuatorOn;", "",
+                                             "start_is_refused_while_an_actuator"),
+    "a START only in the contact window": (
+        DEVICE, "!start_sector(m.n_a, m.phi_a, m.phi_d, c, &n)",
+        "!(start_sector(m.n_a, m.phi_a, m.phi_d, c, &n) || true)", "start_outside_the_window"),
+    "a START only on a known position": (
+        DEVICE, "bool known = enc_.started() && enc_.bad_run() < kLostAfter;",
+        "bool known = true;", "start_is_refused_while_the_position_is_lost"),
 }
 
 

@@ -17,7 +17,7 @@ int32_t floor_div(int32_t a, int32_t b) {
 
 int32_t mod(int32_t a, int32_t b) { return a - b * floor_div(a, b); }
 
-bool is_host_type(uint8_t t) { return t >= kCommand && t <= kClearEstop; }
+bool is_host_type(uint8_t t) { return t >= kCommand && t <= kStart; }
 
 }  // namespace
 
@@ -39,6 +39,15 @@ uint8_t check_command(uint8_t n_a, float phi_a, float phi_d) {
   return 0;
 }
 
+bool start_sector(uint8_t n_a, float phi_a, float phi_d, int32_t c, int32_t* sector) {
+  // the window is at most 64 counts wide: only the largest N = n_a (mod 16) with
+  // 64 N + a(phi_a) <= c can hold c
+  int32_t top = floor_div(c - angle_counts(phi_a), kCountsPerSector);
+  int32_t n = top - mod(top - int32_t(n_a), kPads);
+  *sector = n;
+  return c < n * kCountsPerSector + angle_counts(phi_d);
+}
+
 uint8_t check_config(const Message& m) {
   bool ok = m.telemetry_rate_hz >= 50 && m.telemetry_rate_hz <= 1000 && m.watchdog_ms >= 20 &&
             m.watchdog_ms <= 1000 && m.max_on_ms >= 10 && m.max_on_ms <= 10000 &&
@@ -52,6 +61,7 @@ void Device::reset() {
   decoder_.reset();
   rx_len_ = 0;
   now_us_ = 0;
+  started_ = false;
 }
 
 size_t Device::receive(const uint8_t* data, size_t n) {
@@ -85,18 +95,23 @@ void Device::handle(const Message& m, FrameSink& sink) {
   reply.type = kAck;
   reply.ref_type = m.type;
   reply.ref_counter = m.counter;
-  reply.command_seq = m.type == kCommand ? m.command_seq : 0;
+  reply.command_seq = (m.type == kCommand || m.type == kStart) ? m.command_seq : 0;
   uint8_t reason = 0;
   switch (m.type) {
     case kCommand:
+    case kStart:
       reason = check_command(m.n_a, m.phi_a, m.phi_d);
       if (!reason && s_.estop) reason = kReasonEstop;
       if (!reason && !s_.hv_enabled) reason = kReasonHvDisabled;
+      if (!reason && m.type == kStart) {
+        reason = start(m);
+      } else if (!reason) {
+        s_.pending = Latched{true, m.command_seq, m.n_a, m.phi_a, m.phi_d, 0, 0, 0};
+      }
       if (reason) {
         s_.faults |= kFaultRejected;
         break;
       }
-      s_.pending = Latched{true, m.command_seq, m.n_a, m.phi_a, m.phi_d, 0, 0, 0};
       s_.faults &= ~uint32_t(kFaultRejected | kFaultMaxOn);
       break;
     case kHv:
@@ -140,6 +155,25 @@ void Device::handle(const Message& m, FrameSink& sink) {
   send(reply, sink);
 }
 
+uint8_t Device::start(const Message& m) {
+  // rule 8 past the checks it shares with COMMAND: pad n_a on now if it is in contact within
+  // [phi_a, phi_d) on the last taken count; the pending command is cleared
+  if (s_.q) return kReasonActuatorOn;
+  int32_t c = enc_.unwrapped();
+  int32_t n = 0;
+  bool known = enc_.started() && enc_.bad_run() < kLostAfter;
+  if (!known || !start_sector(m.n_a, m.phi_a, m.phi_d, c, &n)) return kReasonNotInContact;
+  s_.pending.valid = false;
+  s_.target = Latched{true, m.command_seq, m.n_a, m.phi_a, m.phi_d, n, c,
+                      n * kCountsPerSector + angle_counts(m.phi_d), true};
+  s_.eta_unwrapped = n;
+  s_.last_command_seq = m.command_seq;
+  s_.q = true;
+  s_.on_since_us = now_us_;
+  started_ = true;
+  return 0;
+}
+
 void Device::interlocks(uint64_t now_us, const Sensors& sensors) {
   // rule 4: the watchdog
   if (s_.hv_enabled && now_us - s_.last_host_us >= uint64_t(s_.watchdog_ms) * 1000u) {
@@ -181,6 +215,7 @@ void Device::latch(const Latched& u, int32_t count) {
 
 void Device::switching(uint64_t now_us, const EncoderStep& reading) {
   int32_t c = reading.unwrapped;
+  if (started_) return;                       // a START was this tick's one switch
   if (s_.q) {
     if (c >= s_.target.off_count) {           // switch off; latch what is pending
       s_.q = false;
@@ -212,6 +247,7 @@ Outputs Device::outputs() const {
 
 Outputs Device::tick(uint64_t now_us, const Sensors& sensors, FrameSink& sink) {
   now_us_ = now_us;
+  started_ = false;
   Message m;
   for (size_t i = 0; i < rx_len_; ++i) {
     if (decoder_.push(rx_[i], &m) && is_host_type(m.type)) handle(m, sink);

@@ -1,4 +1,4 @@
-// The device rules of protocol v1 section 4 on the device's own readings: what the Teensy
+// The device rules of protocol v1.1 section 4 on the device's own readings: what the Teensy
 // decides on every tick.  Portable C++17, no allocation, no Arduino headers; the board layer
 // (firmware/teensy) feeds it bytes and sensor readings and applies its outputs.
 #pragma once
@@ -43,8 +43,10 @@ struct Latched {
   float phi_a = 0.0f;            // [rad], as received (within the protocol's slack)
   float phi_d = 0.0f;            // [rad]
   int32_t sector = 0;            // unwrapped sector N of the target pad
-  int32_t on_count = 0;          // switch on when the unwrapped count reaches this
+  int32_t on_count = 0;          // switch on when the unwrapped count reaches this (a START:
+                                 // the count it switched on at)
   int32_t off_count = 0;         // switch off when it reaches this
+  bool now = false;              // a START latched it (rule 8), switching the pad on at once
 };
 
 // Everything the device state holds, for tests and the lockstep comparison.
@@ -81,8 +83,14 @@ class FrameSink {
 // prescribes, limited to one sector either way.
 int32_t angle_counts(float phi);
 
-// 0 if u = (n_a, phi_a, phi_d) is acceptable, else its REJECT reason (protocol rule 7).
+// 0 if u = (n_a, phi_a, phi_d) is acceptable, else its REJECT reason (protocol rule 7); the
+// value check of COMMAND and START alike.
 uint8_t check_command(uint8_t n_a, float phi_a, float phi_d);
+
+// Rule 8 in counts (section 6): true when pad n_a is in contact within [phi_a, phi_d) [rad] at
+// the unwrapped count c, with *sector the N = n_a (mod 16) for which
+// 64 N + a(phi_a) <= c < 64 N + a(phi_d).
+bool start_sector(uint8_t n_a, float phi_a, float phi_d, int32_t c, int32_t* sector);
 
 // 0 if the configuration is acceptable, else kReasonConfig (protocol rule 7).
 uint8_t check_config(const Message& m);
@@ -115,6 +123,7 @@ class Device {
   void hv_off();
   void pads_off();
   void latch(const Latched& u, int32_t count);
+  uint8_t start(const Message& m);
   void interlocks(uint64_t now_us, const Sensors& sensors);
   void switching(uint64_t now_us, const EncoderStep& reading);
   Outputs outputs() const;
@@ -126,6 +135,7 @@ class Device {
   uint8_t rx_[kRxBuffer] = {};
   size_t rx_len_ = 0;
   uint64_t now_us_ = 0;
+  bool started_ = false;  // a START switched a pad on at this tick (its one switch)
 };
 
 }  // namespace hasel

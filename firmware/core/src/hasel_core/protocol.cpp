@@ -39,7 +39,8 @@ void pack_payload(const Message& m, Writer& w) {
     case kReject:
       w.u8(m.ref_type); w.u16(m.ref_counter); w.u32(m.command_seq); w.u8(m.reason);
       break;
-    case kCommand: w.u32(m.command_seq); w.u8(m.n_a); w.f32(m.phi_a); w.f32(m.phi_d); break;
+    case kCommand:
+    case kStart: w.u32(m.command_seq); w.u8(m.n_a); w.f32(m.phi_a); w.f32(m.phi_d); break;
     case kHeartbeat: w.u64(m.host_time_us); break;
     case kHv: w.u8(m.enable); break;
     case kConfig:
@@ -62,7 +63,8 @@ void unpack_payload(Reader& r, Message& m) {
     case kReject:
       m.ref_type = r.u8(); m.ref_counter = r.u16(); m.command_seq = r.u32(); m.reason = r.u8();
       break;
-    case kCommand: m.command_seq = r.u32(); m.n_a = r.u8(); m.phi_a = r.f32(); m.phi_d = r.f32(); break;
+    case kCommand:
+    case kStart: m.command_seq = r.u32(); m.n_a = r.u8(); m.phi_a = r.f32(); m.phi_d = r.f32(); break;
     case kHeartbeat: m.host_time_us = r.u64(); break;
     case kHv: m.enable = r.u8(); break;
     case kConfig:
@@ -80,7 +82,8 @@ int payload_size(uint8_t type) {
     case kTelemetry: return 42;
     case kAck: return 7;
     case kReject: return 8;
-    case kCommand: return 13;
+    case kCommand:
+    case kStart: return 13;
     case kHeartbeat: return 8;
     case kHv: return 1;
     case kEstop: return 0;

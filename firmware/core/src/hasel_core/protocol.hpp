@@ -1,4 +1,4 @@
-// Codec of the wheel's serial protocol v1 (docs/protocol.md sections 1-3): CRC-16/CCITT-FALSE,
+// Codec of the wheel's serial protocol v1.1 (docs/protocol.md sections 1-3): CRC-16/CCITT-FALSE,
 // COBS framing, the message layouts, and an incremental decoder that never fails on input
 // bytes.  Portable C++17, no allocation, no Arduino headers.
 #pragma once
@@ -7,7 +7,7 @@
 
 namespace hasel {
 
-constexpr uint8_t kVersion = 1;
+constexpr uint8_t kVersion = 1;                // v1.1 adds START, not a version byte
 constexpr size_t kMaxRaw = 64;                 // raw frame bytes: header + payload + CRC
 constexpr size_t kMaxStuffed = kMaxRaw + 2;    // COBS adds one byte per 254, plus one
 constexpr size_t kMaxWire = kMaxStuffed + 1;   // with the 0x00 delimiter
@@ -17,11 +17,14 @@ enum Type : uint8_t {
   kTelemetry = 0x01, kAck = 0x02, kReject = 0x03,
   kCommand = 0x10, kHeartbeat = 0x11, kHv = 0x12, kEstop = 0x13, kConfig = 0x14,
   kClearEstop = 0x15,
+  kStart = 0x16,  // v1.1: switch the pad in contact on now (rule 8)
 };
 
 enum Reason : uint8_t {
   kReasonNa = 1, kReasonAngle = 2, kReasonOrder = 3, kReasonHvDisabled = 4, kReasonEstop = 5,
   kReasonConfig = 6,
+  kReasonNotInContact = 7,  // v1.1 START: pad n_a not within [phi_a, phi_d), or position lost
+  kReasonActuatorOn = 8,    // v1.1 START: an actuator is on
 };
 
 enum Fault : uint32_t {
@@ -50,9 +53,9 @@ struct Message {
   // ACK, REJECT
   uint8_t ref_type = 0;
   uint16_t ref_counter = 0;
-  uint32_t command_seq = 0;       // also COMMAND's
+  uint32_t command_seq = 0;       // also COMMAND's and START's
   uint8_t reason = 0;
-  // COMMAND
+  // COMMAND, START
   uint8_t n_a = 0;
   float phi_a = 0.0f;             // [rad]
   float phi_d = 0.0f;             // [rad]
@@ -65,7 +68,7 @@ struct Message {
   uint8_t drain_mode = 0;
 };
 
-// Payload size of a message type, or -1 for a type protocol v1 does not define.
+// Payload size of a message type, or -1 for a type protocol v1.1 does not define.
 int payload_size(uint8_t type);
 
 // CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF); its check value for "123456789" is 0x29B1.
@@ -78,7 +81,7 @@ size_t cobs_encode(const uint8_t* in, size_t n, uint8_t* out);
 int cobs_decode(const uint8_t* in, size_t n, uint8_t* out);
 
 // The wire bytes of one frame, COBS(raw frame) + 0x00, into out (room for kMaxWire bytes);
-// returns their number, or 0 for a type protocol v1 does not define.
+// returns their number, or 0 for a type protocol v1.1 does not define.
 size_t encode(const Message& m, uint8_t* out);
 
 // What a decoder dropped, by cause (section 1), and what it delivered.
