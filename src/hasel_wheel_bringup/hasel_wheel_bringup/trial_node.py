@@ -94,7 +94,7 @@ class TrialNode(Node):
         s = samples.telemetry_from_msg(msg)
         self.last_sample = s
         # until the plant's command subscription is matched, a command would be lost; a wheel
-        # left without one coasts to a stop, and no pad can start a stopped wheel
+        # left without one coasts to a stop, and an open-loop trial does not start a stopped one
         if self.schedule.index < 0 and self.pub_cmd.get_subscription_count() == 0:
             return
         done_before = len(self.schedule.results)

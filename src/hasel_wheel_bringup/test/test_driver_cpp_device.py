@@ -20,8 +20,8 @@ from hasel_wheel_common import protocol as P
 
 SCALE = 3.0                   # simulated seconds per wall second
 REFERENCE = 1.5               # [rad/s]
-#: Initial wheel speed [rad/s]: the device streams from power-up while the wheel coasts, and
-#: the loop cannot start a standing wheel, so it must still roll when the host connects
+#: Initial wheel speed [rad/s]: the device streams from power-up while the wheel coasts (the
+#: paper's wheel, which has no start push), so it must still roll when the host connects
 W0 = 4.0
 #: the device's watchdog counts simulated time; scaled runs use the protocol's longest
 SCALED_CONFIG = P.Config(telemetry_rate_hz=300, watchdog_ms=1000, max_on_ms=2000, drain_mode=0)

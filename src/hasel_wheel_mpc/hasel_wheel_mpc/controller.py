@@ -52,12 +52,13 @@ class SpeedController:
 
     def start(self, angle: float, speed: float) -> Command | None:
         """The first start command, sent before the first sample, for a wheel at ``angle``
-        [rad] turning at ``speed`` [rad/s]; None for a standing wheel, which the core starts
-        from its first samples (the pad in contact is the one the encoder reads, so a replay
-        of the recording starts it alike)."""
-        if abs(speed) < self.config.start.still_speed:
+        [rad] turning at ``speed`` [rad/s]; None for a standing or slow wheel, which the core
+        starts from its first samples with a START (the pad in contact is the one the encoder
+        reads, so a replay of the recording starts it alike)."""
+        cmd = self.core.start_command(angle, speed)
+        if cmd is None or cmd.now:
             return None
-        cmd = self.core.sent_start(self.core.start_command(angle, speed), angle)
+        cmd = self.core.sent_start(cmd, angle)
         self.observer.command_sent(cmd.sequence, cmd.phi_a, cmd.phi_d, cmd.now)
         return cmd
 

@@ -51,6 +51,12 @@ REDECIDE_MIN_TIME = 0.02
 START_PERIOD = 30
 #: Extra lead of the start command over the MPC's deadline margin (its way to the device) [s].
 START_LEAD = 0.1
+#: Below this speed [rad/s] the start policy switches each pad on with a START as it comes
+#: into contact (the most push a slow wheel can get); faster, with sequence-0 commands.
+START_SLOW = 0.6
+#: A rolling wheel's pad in contact gets a START only up to this contact angle [rad]; further
+#: on it would push briefly before it switches off at the end of its sector.
+START_MAX_CONTACT = SECTOR / 2
 #: Encoder samples the start policy reads the wheel's speed from [samples].
 START_SAMPLES = 30
 #: The least time those samples must span before a start command is aimed [s].
@@ -220,12 +226,18 @@ class ControlCore:
         self._encoder.append((t, angle))
         self._latched = latched_sequence
 
-    def start_command(self, angle: float, speed: float) -> Command:
-        """The start command for a wheel at ``angle`` [rad] turning at ``speed`` [rad/s]:
-        a START of the pad in contact (window ``START_NOW_WINDOW``) when the wheel stands
-        (slower than ``config.start.still_speed``), else sequence 0 at ``START_ANGLES``."""
-        if abs(speed) < self.config.start.still_speed:
+    def start_command(self, angle: float, speed: float) -> Command | None:
+        """The start command for a wheel at ``angle`` [rad] turning at ``speed`` [rad/s]: a
+        START of the pad in contact (window ``START_NOW_WINDOW``) when the wheel stands
+        (slower than ``config.start.still_speed``), or rolls slower than ``START_SLOW`` with
+        the pad in contact no further than ``START_MAX_CONTACT`` (None when it is further: the
+        next pad comes into contact soon); faster, sequence 0 at ``START_ANGLES``."""
+        contact = angle - contact_sector(angle) * SECTOR
+        if abs(speed) < self.config.start.still_speed or (
+                abs(speed) < START_SLOW and contact <= START_MAX_CONTACT):
             return Command(contact_pad(angle), *START_NOW_WINDOW, 0, now=True)
+        if abs(speed) < START_SLOW:
+            return None
         lead = self.mpc.config.deadline_margin + START_LEAD
         return Command(next_pad(angle, speed, START_ANGLES[0], lead), *START_ANGLES, 0)
 
@@ -348,12 +360,14 @@ class ControlCore:
         speed = self._encoder_speed()
         if speed is None or (self.starts and self._samples - self._start_sample < START_PERIOD):
             return None
-        if e.q or (abs(speed) >= self.config.start.still_speed
+        if e.q or (abs(speed) >= START_SLOW
                    and -max(speed, 0.0) * START_LEAD < e.act_counter <= 2.0 * SECTOR):
             return None
         angle = self._encoder[-1][1]
         cmd = self.start_command(angle, speed)
-        if cmd.now:
+        if cmd is None:
+            return None
+        if cmd.now and abs(speed) < self.config.start.still_speed:   # a restart
             self.gave_up = self.stall.start(cmd.n_a)
             if self.gave_up is not None:
                 return None

@@ -43,13 +43,13 @@ def test_from_rest_the_wheel_starts_and_holds_its_reference():
 def test_an_obstacle_that_stops_the_wheel_is_driven_through_by_a_restart():
     obstacle = {"enabled": True, "time": {"value": 20.0, "unit": "s"},
                 "duration": {"value": 0.5, "unit": "s"}, "torque": {"value": 0.2, "unit": "N*m"}}
-    loop, log, t, v = run(plant(1, obstacle=obstacle), 1.0, 40.0)
+    loop, log, t, v = run(plant(1, obstacle=obstacle), 1.0, 50.0)
     assert v[(t > 20.3) & (t < 20.5)].max() == 0.0                  # it stopped the wheel
-    assert loop.ctrl.core.stall.total_restarts == 1
+    assert loop.ctrl.core.stall.total_restarts >= 1
     after = t > 20.5
     back = t[after][np.argmax(np.abs(v[after] - 1.0) <= 0.02)] - 20.5
-    assert back < 10.0
-    assert abs(v[t > 30.0].mean() - 1.0) <= 0.02
+    assert back < 12.0
+    assert abs(v[t > 40.0].mean() - 1.0) <= 0.01                   # and holds it again
 
 
 def test_an_obstacle_that_holds_for_good_ends_with_hv_off_and_the_pad_named():
