@@ -153,7 +153,8 @@ class ControlCore:
     The MPC decides where :func:`decision_point` says.  Until the first switch-on (not a
     START's: the MPC takes over at the switch-on after it, once the wheel rolls), at every
     other sample the core sends a start command, at most every ``START_PERIOD`` samples: to a
-    standing wheel with no pad on, a START (``now``) of the pad in contact in the window
+    standing wheel with no pad on, or a slow one (``START_SLOW``) whose pad in contact is no
+    further than ``START_MAX_CONTACT``, a START (``now``) of that pad in the window
     ``START_NOW_WINDOW``; otherwise, whenever no pad is latched within the next two sectors,
     sequence 0 for the pad whose activation angle ``START_ANGLES[0]`` is next ahead of the
     encoder's angle and speed, at ``START_ANGLES``.  A stalled wheel is restarted the same

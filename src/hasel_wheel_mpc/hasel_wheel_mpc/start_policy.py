@@ -5,8 +5,8 @@ last encoder window (:data:`~hasel_wheel_mpc.core.START_SAMPLES` samples).  A st
 with no pad on is started with a START (protocol v1.1): the pad in contact switches on at
 once and pushes (docs/model.md, "Start from rest").  A wheel that was rolling and has been
 slower than ``still_speed`` for ``stall_time`` [s] while the reference is above zero has
-*stalled*: the MPC gives way to the start policy again.  Every START counts as a restart
-until the wheel reaches half its reference; the START after ``max_restarts`` of them is
+*stalled*: the MPC gives way to the start policy again.  Every START of a standing wheel
+counts as a restart until the wheel reaches half its reference; the START after ``max_restarts`` of them is
 not sent: the policy gives up, HV goes off, and diagnostics say at which pad.
 Tests: ``test_start_policy.py``, ``test_core.py``.
 """
