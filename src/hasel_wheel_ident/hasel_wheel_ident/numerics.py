@@ -11,6 +11,9 @@ identification benchmarks (:func:`pin_blas_kernels`, before they import numpy) r
 machine with AVX2 and FMA, as Intel's MKL does with ``MKL_CBWR``.  Importing the package
 pins nothing: a program that uses it keeps OpenBLAS's own choice.
 
+numpy's own vector loops are a second source: they take AVX-512 routes where the CPU has
+AVX-512 and AVX2 routes elsewhere (:func:`has_avx512`), and no switch pins them.
+
 The kernels are chosen once, when OpenBLAS loads.  A value the user set for
 ``OPENBLAS_CORETYPE`` is kept; nothing is pinned on a CPU without AVX2 and FMA or on other
 architectures.  test_numerics.py holds these rules.
@@ -35,6 +38,13 @@ def _cpu_flags() -> set[str]:
     except OSError:
         pass
     return set()
+
+
+def has_avx512() -> bool:
+    """Whether this CPU has AVX-512 (``avx512f``), on which numpy's own vector loops (exp,
+    log, sums) take their AVX-512 routes; without it they take AVX2 routes, whose last bits
+    differ.  Pinning OpenBLAS does not pin these."""
+    return "avx512f" in _cpu_flags()
 
 
 def pinnable() -> bool:

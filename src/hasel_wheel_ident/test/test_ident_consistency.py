@@ -313,6 +313,7 @@ def _beside(effects: dict, cid: str, seed: int = 11) -> tuple[K.Consistency, str
     return con, SI.drift_stand_in(trials, base, eff, fit, eff[0], con, min_gain=0.1)
 
 
+@pytest.mark.avx512_route
 def test_a_drifting_stand_in_loses_its_hold_beside_the_measured_loss():
     # a rise lag fitted to retention of 0.2/s drifts; beside a force loss that grows with HV
     # time (the device: retention without recovery, whose 300 s hardly act in 34 s) the

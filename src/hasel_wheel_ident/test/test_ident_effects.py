@@ -111,7 +111,7 @@ def _realised_gain_std(seed: int, effects: dict = SPREAD) -> float:
 
 @pytest.mark.parametrize("effect, cid, truth, halvable", [
     (SPREAD, "gain_spread", None, True),
-    (VISCOUS, "viscous_drag", {"c": 0.001}, True),
+    pytest.param(VISCOUS, "viscous_drag", {"c": 0.001}, True, marks=pytest.mark.avx512_route),
     # a 50 ms rise lag that the nominal force law half absorbs (screened from a single
     # start it scored chi^2 8 and was never refitted, and charge retention was named)
     (RISE, "rise_lag", {"tau": 0.05}, True),
@@ -422,7 +422,7 @@ def _refused_leaving_a_drift(res: Identification, cid: str
     return refused[0].codes, drift[0]
 
 
-@pytest.mark.parametrize("seed", [11, 12])
+@pytest.mark.parametrize("seed", [pytest.param(11, marks=pytest.mark.avx512_route), 12])
 def test_retention_standing_in_for_a_rise_lag_outside_the_library_is_refused_beside_the_lag(seed):
     # 3 x 34 s: retention refitted to a 40 ms rise lag grows with the trials' speed, short of
     # the refusal (seed 11: k = +1.42, p = 0.0025; seed 12: k = +0.99, p = 0.045; README),
@@ -487,6 +487,7 @@ def test_a_rise_lag_standing_in_for_weak_retention_is_refused_though_it_does_not
     assert entry["drift_devices"]["hv_loss"]["wald_p_together"] == loss["wald_p_together"]
 
 
+@pytest.mark.avx512_route
 def test_weak_retention_is_not_taken_for_a_rise_lag_once_the_coast_downs_end_at_rest():
     # retention of 0.05/s with the whole library, 3 x 34 s (plant seed 13).  While each
     # coast-down ran on to the last change of a stopped wheel's flickering count, the rest
