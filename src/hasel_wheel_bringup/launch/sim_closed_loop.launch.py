@@ -21,6 +21,7 @@ file (its seed) and the controller's model file in the bag's custom data.
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, IncludeLaunchDescription, OpaqueFunction
 from launch.launch_description_sources import PythonLaunchDescriptionSource
+from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.substitutions import FindPackageShare
 
@@ -39,6 +40,8 @@ def _wheels(context):
     names = ([LaunchConfiguration("namespace").perform(context)] if n == 1 else
              [f"wheel{i}" for i in range(n)])
     sim_share = FindPackageShare("hasel_wheel_sim")
+    # the observer, the MPC and (when recording) the recorder: the bag gets the first sample
+    listeners = str(2 + IfCondition(LaunchConfiguration("record")).evaluate(context))
     actions = []
     for i, ns in enumerate(names):
         observer, mpc = controller_nodes(ns)
@@ -50,7 +53,8 @@ def _wheels(context):
                               "plant_file": LaunchConfiguration("plant_file"),
                               "time_scale": LaunchConfiguration("time_scale"),
                               "seed_offset": str(i),
-                              "model_file": LaunchConfiguration("plant_model_file")}.items())
+                              "model_file": LaunchConfiguration("plant_model_file"),
+                              "telemetry_subscribers": listeners}.items())
         actions += [*when_all_ready([observer, mpc], [sim]), observer, mpc]
     return [include_recording(["observer_params_file", "mpc_params_file", "sim_params_file",
                                "plant_file", "controller_model_file"], names), *actions]

@@ -67,6 +67,11 @@ class SimNode(Node):
             float_param("hold the wheel at t = 0 until a node that publishes commands "
                         "subscribes to telemetry, or this long [s]; 0 = start at once", 0.0, 60.0,
                         True)).value
+        self.telemetry_subscribers = self.declare_parameter(
+            "telemetry_subscribers", 0,
+            int_param("also hold the wheel until this many subscriptions match telemetry (the "
+                      "launch files: the observer, the MPC and the recorder) [1]", 0, 100,
+                      True)).value
         self.declare_parameter("frame_id", "wheel", text_param("frame_id of telemetry headers"))
         self.declare_parameter("diagnostics_period", 1.0,
                                float_param("period of /diagnostics [s]", 0.1, 60.0, True))
@@ -133,7 +138,8 @@ class SimNode(Node):
             return {(i.node_namespace, i.node_name) for i in infos}
         connected = self.sub_cmd.get_publisher_count() > 0 and bool(
             nodes(self.get_subscriptions_info_by_topic(self.pub_tlm.topic_name))
-            & nodes(self.get_publishers_info_by_topic(self.sub_cmd.topic_name)))
+            & nodes(self.get_publishers_info_by_topic(self.sub_cmd.topic_name))) and \
+            self.pub_tlm.get_subscription_count() >= self.telemetry_subscribers
         waited = time.monotonic() - self.created
         if not (connected or waited >= self.start_timeout):
             return False

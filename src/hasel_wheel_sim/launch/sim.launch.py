@@ -27,6 +27,9 @@ def generate_launch_description():
                               description="model file (e.g. hasel_wheel identify's model.yaml) "
                                           "as the plant's dynamics; then plant_file may hold "
                                           "sensor/link effects only ('' = not used)"),
+        DeclareLaunchArgument("telemetry_subscribers", default_value="0",
+                              description="hold the wheel until this many subscriptions "
+                                          "match telemetry (and its controller is connected)"),
         Node(package="hasel_wheel_sim", executable="sim_node", name="sim",
              namespace=LaunchConfiguration("namespace"), output="screen",
              on_exit=Shutdown(reason="the simulated wheel exited"),
@@ -37,5 +40,7 @@ def generate_launch_description():
                           "seed_offset": ParameterValue(LaunchConfiguration("seed_offset"),
                                                         value_type=int),
                           "model_file": ParameterValue(LaunchConfiguration("model_file"),
-                                                       value_type=str)}]),
+                                                       value_type=str),
+                          "telemetry_subscribers": ParameterValue(
+                              LaunchConfiguration("telemetry_subscribers"), value_type=int)}]),
     ])
