@@ -12,9 +12,17 @@ Tests: ``test_start_policy.py``, ``test_core.py``.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import NamedTuple
+
+from hasel_wheel_sim.params import FieldSpec, ParameterError, check_value
+
+#: Unit and allowed range of each :class:`StartConfig` field.
+START_FIELDS = {
+    "still_speed": FieldSpec("rad/s", 0.0, 1.0, high_closed=True),
+    "stall_time": FieldSpec("s", 0.1, 60.0, True, True),
+    "max_restarts": FieldSpec("count", 0.0, 100.0, True, True),
+}
 
 #: A restart run ends once the wheel reaches this fraction of its reference [1].
 RECOVERED = 0.5
@@ -38,18 +46,12 @@ class StartConfig:
     max_restarts: int = 5
 
     def __post_init__(self) -> None:
-        def number(v) -> bool:
-            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-        if not (number(self.still_speed) and 0.0 < self.still_speed <= 1.0):
-            raise ValueError(f"start.still_speed = {self.still_speed!r}: expected a speed in "
-                             f"(0, 1] rad/s")
-        if not (number(self.stall_time) and 0.1 <= self.stall_time <= 60.0):
-            raise ValueError(f"start.stall_time = {self.stall_time!r}: expected a time in "
-                             f"[0.1, 60] s")
-        if not (number(self.max_restarts) and float(self.max_restarts).is_integer()
-                and 0 <= self.max_restarts <= 100):
-            raise ValueError(f"start.max_restarts = {self.max_restarts!r}: expected a whole "
-                             f"number of restarts in [0, 100]")
+        """Range-check every field (:data:`START_FIELDS`); raises ParameterError naming it."""
+        for name, spec in START_FIELDS.items():
+            check_value(name, getattr(self, name), spec, "start")
+        if not float(self.max_restarts).is_integer():
+            raise ParameterError(f"start: field 'max_restarts' = {self.max_restarts!r} is not a "
+                                 f"whole number of restarts")
 
 
 class StallVerdict(NamedTuple):

@@ -6,10 +6,10 @@ from hasel_wheel_mpc.start_policy import GIVE_UP, RECOVERED, StallMonitor, Start
 
 
 @pytest.mark.parametrize("field, value, match", [
-    ("still_speed", 0.0, r"start.still_speed = 0.0: expected a speed in \(0, 1\] rad/s"),
-    ("stall_time", 0.05, r"start.stall_time = 0.05: expected a time in \[0.1, 60\] s"),
-    ("max_restarts", 2.5, r"start.max_restarts = 2.5: expected a whole number"),
-    ("max_restarts", True, r"start.max_restarts = True"),
+    ("still_speed", 0.0, r"'still_speed' = 0.0 is out of range; allowed range is \(0, 1\] rad/s"),
+    ("stall_time", 0.05, r"'stall_time' = 0.05 is out of range; allowed range is \[0.1, 60\] s"),
+    ("max_restarts", 2.5, r"'max_restarts' = 2.5 is not a whole number"),
+    ("max_restarts", True, r"'max_restarts' = True is not a number"),
 ])
 def test_a_value_out_of_range_is_refused_with_its_range(field, value, match):
     with pytest.raises(ValueError, match=match):
